@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Install the system libraries swarmpose needs on Debian/Ubuntu, when they are missing.
+# Open3D's wheel links libusb-1.0, libGL and libgomp; a fresh Debian may also lack python3-venv.
+# As root this runs apt-get; otherwise it names the packages to install and fails.
+set -euo pipefail
+
+python=${PYTHON:-python3}
+declare -A lib_package=(
+  [libusb-1.0.so.0]=libusb-1.0-0
+  [libGL.so.1]=libgl1
+  [libgomp.so.1]=libgomp1
+)
+missing=()
+for lib in "${!lib_package[@]}"; do
+  if ! ldconfig -p 2>/dev/null | grep -q "$lib"; then
+    missing+=("${lib_package[$lib]}")
+  fi
+done
+if ! "$python" -m venv --help >/dev/null 2>&1 || ! "$python" -c "import ensurepip" >/dev/null 2>&1; then
+  missing+=(python3-venv)
+fi
+if ((${#missing[@]} == 0)); then
+  exit 0
+fi
+if [[ $(id -u) -eq 0 ]] && command -v apt-get >/dev/null; then
+  echo "installing system packages: ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+else
+  echo "swarmpose needs these system packages: ${missing[*]}" >&2
+  echo "install them (e.g. 'sudo apt-get install ${missing[*]}') and run make again" >&2
+  exit 1
+fi

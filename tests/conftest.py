@@ -1,0 +1,29 @@
+"""Shared test helpers: where the real assets live, and skips when they are absent."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared"
+ASSETS = SHARED / "assets"
+MAKEHUMAN = ASSETS / "bodies" / "makehuman"
+MOCAP = ASSETS / "mocap"
+
+needs_assets = pytest.mark.skipif(
+    not ASSETS.is_dir(),
+    reason=f"real assets not found at {ASSETS} (clone the project next to its shared/ folder, as CI does)",
+)
+
+
+def surface_distance(vertices: np.ndarray, triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Unsigned distance (N,) m from points (N, 3) to a triangle mesh, by Open3D's RaycastingScene."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(vertices, dtype=np.float32)),
+                        o3d.core.Tensor(np.asarray(triangles, dtype=np.uint32)))
+    return scene.compute_distance(o3d.core.Tensor(np.asarray(points, dtype=np.float32))).numpy()
