@@ -31,7 +31,7 @@ def face_landmarks(vertices: np.ndarray, head: np.ndarray, neck: np.ndarray,
     most lateral head vertex on each side within 2 cm of eye height, behind the face.
     """
     v = vertices
-    head_region = (v[:, 1] > neck[1] + 0.04) & (np.hypot(v[:, 0] - head[0], v[:, 2] - head[2]) < 0.14)
+    head_region = (v[:, 1] > neck[1] + 0.04) & (np.hypot(v[:, 0] - head[0], v[:, 2] - head[2]) < 0.2)
     mid = head_region & (np.abs(v[:, 0] - head[0]) < 0.01) & (v[:, 1] > head[1] - 0.08)
     nose = _pick(v, mid, v[:, 2], "nose")
     if eyes is None:

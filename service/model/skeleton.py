@@ -32,7 +32,8 @@ axis is -X so that the Table 1 ranges mean the anatomical motion:
 
 All angles zero is the T-pose (arms straight out sideways, legs straight down, feet
 flat and forward) on every body, so an angle means the same on every body. A body whose rest pose
-is not a T-pose (MakeHuman and the built-in body stand in an A-pose with bent elbows)
+is not a T-pose (MakeHuman and the built-in body stand in an A-pose, MakeHuman's
+elbows bent)
 has *rest angles* (:func:`swarmpose.model.joint_angles.rest_angles`), and skinning uses
 each bone's rotation relative to its rest frame, so the rest angles give the rest mesh.
 """

@@ -1,0 +1,90 @@
+"""Command-line behaviour: bad input gives one clear line and exit status 2, no traceback."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from conftest import MAKEHUMAN, MOCAP, needs_assets
+from swarmpose.cli import main
+
+
+def _run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "swarmpose.cli", *args], capture_output=True, text=True, timeout=300)
+
+
+def _assert_clean_error(proc: subprocess.CompletedProcess, *words: str) -> None:
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    last = proc.stderr.strip().splitlines()[-1]
+    for word in words:
+        assert word in last, last
+
+
+def test_unknown_builtin_preset(tmp_path):
+    proc = _run("synth", "--shape", "giant", "--motion", "builtin:wave", "--frames", "1", "--out", str(tmp_path))
+    _assert_clean_error(proc, "giant", "default")
+
+
+def test_unknown_builtin_motion(tmp_path):
+    proc = _run("synth", "--motion", "builtin:moonwalk", "--frames", "1", "--out", str(tmp_path))
+    _assert_clean_error(proc, "moonwalk", "wave")
+
+
+def test_missing_makehuman_directory(tmp_path):
+    proc = _run("synth", "--body", f"makehuman:{tmp_path / 'nowhere'}", "--motion", "builtin:wave", "--frames", "1",
+                "--out", str(tmp_path / "out"))
+    _assert_clean_error(proc, "nowhere", "base.obj")
+
+
+def test_missing_and_foreign_bvh(tmp_path):
+    _assert_clean_error(_run("synth", "--motion", str(tmp_path / "none.bvh"), "--frames", "1", "--out", str(tmp_path)),
+                        "none.bvh")
+    robot = tmp_path / "robot.bvh"
+    robot.write_text("HIERARCHY\nROOT Base\n{\n OFFSET 0 0 0\n CHANNELS 3 Xposition Yposition Zposition\n"
+                     " End Site\n {\n  OFFSET 0 1 0\n }\n}\nMOTION\nFrames: 1\nFrame Time: 0.1\n0 0 0\n")
+    _assert_clean_error(_run("synth", "--motion", str(robot), "--frames", "1", "--out", str(tmp_path / "o")),
+                        "unknown BVH skeleton")
+
+
+def test_unwritable_output(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    proc = _run("synth", "--motion", "builtin:wave", "--frames", "1", "--out", str(blocker / "seq"))
+    _assert_clean_error(proc, str(blocker / "seq"), "--out")
+
+
+def test_bad_flags_exit_2():
+    assert _run("synth", "--motion", "builtin:wave", "--frames", "0", "--out", "x").returncode == 2
+    assert _run("synth", "--frames", "3", "--out", "x").returncode == 2  # --motion missing
+    _assert_clean_error(_run("synth", "--motion", "builtin:wave", "--frames", "1", "--out", "x",
+                             "--camera-distance", "50"), "--camera-distance")
+
+
+@needs_assets
+def test_more_frames_than_the_clip_has(tmp_path):
+    proc = _run("synth", "--motion", str(MOCAP / "makehuman_walk1.bvh"), "--frames", "500", "--out", str(tmp_path))
+    _assert_clean_error(proc, "--frames")
+
+
+def test_body_info_json(capsys):
+    assert main(["body", "--body", "builtin", "--shape", "female", "--lod", "1500", "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert 1300 <= info["triangles"] <= 1700 and 1.6 < info["height_m"] < 1.7
+
+
+@needs_assets
+def test_makehuman_preset_exported_to_glb_reloads(tmp_path, capsys):
+    glb = tmp_path / "male-heavy.glb"
+    assert main(["body", "--body", f"makehuman:{MAKEHUMAN}", "--shape", "male-heavy", "--export", str(glb)]) == 0
+    capsys.readouterr()
+    assert main(["body", "--body", str(glb), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["vertices"] == 13380 and abs(info["height_m"] - 1.748) < 0.01
+
+
+def test_demo_writes_a_sequence(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path / "demo"), "--frames", "2", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "wrote 2 frames" in out and (tmp_path / "demo" / "depth" / "000001.png").is_file()
