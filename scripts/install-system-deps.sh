@@ -10,9 +10,12 @@ declare -A lib_package=(
   [libGL.so.1]=libgl1
   [libgomp.so.1]=libgomp1
 )
+# ldconfig lives in /sbin on Debian, off a normal user's PATH; read its cache once.
+ldconfig_bin=$(command -v ldconfig || echo /sbin/ldconfig)
+cache=$("$ldconfig_bin" -p 2>/dev/null || true)
 missing=()
 for lib in "${!lib_package[@]}"; do
-  if ! ldconfig -p 2>/dev/null | grep -q "$lib"; then
+  if [[ $cache != *"$lib"* ]]; then
     missing+=("${lib_package[$lib]}")
   fi
 done

@@ -134,7 +134,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("body", help="describe a body model; --export writes it as GLB")
     _add_body_options(p)
-    p.add_argument("--lod", type=int, default=0, help="decimate to about this many triangles")
+    p.add_argument("--lod", type=int, default=0, help="decimate to about this many triangles (at least 100)")
     p.add_argument("--export", default=None, help="write the (personalised) body to this .glb")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_body)

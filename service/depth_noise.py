@@ -6,7 +6,7 @@ Applied to a clean depth image (H, W) in metres (0 = no measurement), in this or
    (Nguyen, Izadi & Lovell 2012 for Kinect v1: 1.2 mm + 1.9 mm/m^2 (z - 0.4 m)^2).
 2. **Disparity quantisation**: a structured-light camera measures disparity
    ``d = f b / z`` in steps of ``1 / subpixel`` pixel, so depth comes in steps of about
-   ``z^2 / (f b subpixel)`` (f = 580 px, b = 7.5 cm, 1/8 px: 2.6 mm at 1 m, 2.6 cm at 3 m).
+   ``z^2 / (f b subpixel)`` (f = 580 px, b = 7.5 cm, 1/8 px: 2.9 mm at 1 m, 2.6 cm at 3 m).
 3. **Edge dropout**: a pixel whose 3x3 neighbourhood spans more than ``edge_jump`` metres
    of depth is lost with probability ``edge_dropout``.
 4. **Random dropout**: any pixel is lost with probability ``random_dropout``.

@@ -96,23 +96,46 @@ def axis_angle_matrix(axis, angle: np.ndarray) -> np.ndarray:
 
 
 def shortest_arc(src, dst) -> np.ndarray:
-    """The (3, 3) rotation of least angle turning direction ``src`` onto ``dst``."""
+    """Rotations (..., 3, 3) of least angle turning directions ``src`` onto ``dst`` (..., 3).
+
+    Opposite directions turn by pi about an axis perpendicular to ``src``.
+    """
     a = np.asarray(src, dtype=np.float64)
     b = np.asarray(dst, dtype=np.float64)
-    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
-    v, c = np.cross(a, b), float(np.dot(a, b))
-    if c < -1 + 1e-12:  # opposite: turn by pi about any axis perpendicular to a
-        perp = np.cross(a, [1.0, 0, 0] if abs(a[0]) < 0.9 else [0, 1.0, 0])
-        return axis_angle_matrix(perp, np.pi)
-    kx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
-    return np.eye(3) + kx + kx @ kx / (1 + c)
+    a, b = np.broadcast_arrays(a / np.linalg.norm(a, axis=-1, keepdims=True),
+                               b / np.linalg.norm(b, axis=-1, keepdims=True))
+    v = np.cross(a, b)
+    c = np.sum(a * b, axis=-1)
+    opposite = c < -1 + 1e-9
+    if np.any(opposite):  # any perpendicular axis will do
+        helper = np.where(np.abs(a[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+        perp = np.cross(a, helper)
+        perp /= np.linalg.norm(perp, axis=-1, keepdims=True)
+        v = np.where(opposite[..., None], perp, v)
+    k = np.zeros(v.shape[:-1] + (3, 3))
+    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    # Rodrigues with sin = |v|, cos = c; for the opposite case (|v| = 1 after replacement) 1 + cos -> 2 (pi turn).
+    scale = np.where(opposite, 2.0, 1.0 / np.maximum(1.0 + c, 1e-12))
+    return np.eye(3) + np.where(opposite[..., None, None], 0.0, k) + (k @ k) * scale[..., None, None]
+
+
+def rotation_power(rot: np.ndarray, fraction: float) -> np.ndarray:
+    """``rot ** fraction`` (..., 3, 3): the same axis, ``fraction`` of the angle (< pi)."""
+    q = matrix_to_quaternion(rot)
+    half = np.arccos(np.clip(q[..., 0], -1.0, 1.0))
+    sin_half = np.sin(half)
+    axis = np.where(sin_half[..., None] > 1e-12, q[..., 1:] / np.maximum(sin_half, 1e-12)[..., None], 0.0)
+    return quaternion_to_matrix(np.concatenate([np.cos(fraction * half)[..., None],
+                                                axis * np.sin(fraction * half)[..., None]], -1))
 
 
 def joint_rotations(angles: np.ndarray, fraction: float = 1.0) -> np.ndarray:
     """Canonical-frame joint rotations ``E_j`` (P, 14, 3, 3) from angles (P, 29) rad.
 
-    ``E_j = R(compose[0]) R(compose[1]) ...`` of the joint's DOFs (see skeleton), each
-    angle multiplied by ``fraction`` (bones that share a joint take a fraction of it).
+    ``E_j = R(compose[0]) R(compose[1]) ...`` of the joint's DOFs (see skeleton). With
+    ``fraction`` f < 1 it returns ``E_j ** f`` (same axis, f of the angle), so that k bones
+    sharing a joint with f = 1/k compose to exactly ``E_j``.
     """
     angles = np.asarray(angles, dtype=np.float64)
     out = np.empty(angles.shape[:-1] + (len(TRACKING_JOINTS), 3, 3))
@@ -122,9 +145,9 @@ def joint_rotations(angles: np.ndarray, fraction: float = 1.0) -> np.ndarray:
         rot = np.broadcast_to(np.eye(3), angles.shape[:-1] + (3, 3))
         for kind in joint.compose:
             k = kinds.index(kind)
-            rot = rot @ axis_angle_matrix(joint.dofs[k].axis, fraction * angles[..., first + k])
+            rot = rot @ axis_angle_matrix(joint.dofs[k].axis, angles[..., first + k])
         out[..., ji, :, :] = rot
-    return out
+    return out if fraction == 1.0 else rotation_power(out, fraction)
 
 
 # ---------------------------------------------------------------------------- rig and FK

@@ -29,7 +29,7 @@ import numpy as np
 
 from .bvh import BvhClip, read_bvh
 from .errors import MotionError
-from .kinematics import axis_angle_matrix
+from .kinematics import axis_angle_matrix, shortest_arc
 from .model.body import SkinnedBody
 from .model.joint_angles import TOPOLOGICAL_ORDER, clamp_joint, decompose_joint, joint_rotation
 from .model.skeleton import N_ANGLES, TRACKING_JOINTS, angle_offset
@@ -121,19 +121,6 @@ def _frame_from(lateral: np.ndarray, up: np.ndarray) -> np.ndarray:
     return np.stack([x, y, np.cross(x, y)], axis=-1)
 
 
-def _arc_batch(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """Shortest-arc rotations (N, 3, 3) turning directions src (N, 3) onto dst (N, 3)."""
-    a = src / np.linalg.norm(src, axis=-1, keepdims=True)
-    b = dst / np.linalg.norm(dst, axis=-1, keepdims=True)
-    v = np.cross(a, b)
-    c = np.sum(a * b, axis=-1)
-    k = np.zeros(a.shape[:-1] + (3, 3))
-    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    scale = 1.0 / np.maximum(1.0 + c, 1e-9)
-    return np.eye(3) + k + (k @ k) * scale[..., None, None]
-
-
 def _is_standing(rest: np.ndarray, idx: dict[str, int]) -> bool:
     """True when joint positions (J, 3) look like an upright person: hips apart, torso across them."""
     lateral = rest[idx["left_thigh"]] - rest[idx["right_thigh"]]
@@ -152,6 +139,7 @@ def retarget(clip: BvhClip, body: SkinnedBody, fps: float | None = None) -> Moti
         clip = clip.resample(fps)
     idx = _Roles(clip).index
     rot_f, pos_f = clip.global_transforms()
+    rest = clip.rest_positions()
     for side in ("left", "right"):  # feet without a toe joint: use the foot's end site
         if f"{side}_toe" not in idx:
             foot = idx[f"{side}_foot"]
@@ -160,9 +148,8 @@ def retarget(clip: BvhClip, body: SkinnedBody, fps: float | None = None) -> Moti
             end = pos_f[:, foot] + rot_f[:, foot] @ clip.end_offsets[foot]
             pos_f = np.concatenate([pos_f, end[:, None]], axis=1)
             rot_f = np.concatenate([rot_f, rot_f[:, foot, None]], axis=1)
+            rest = np.concatenate([rest, (rest[foot] + clip.end_offsets[foot])[None]])
             idx[f"{side}_toe"] = pos_f.shape[1] - 1
-    rest = clip.rest_positions()
-    rest = np.concatenate([rest, *(pos_f[:1, j] - pos_f[0, 0] + rest[0] for j in range(len(rest), pos_f.shape[1]))])
     if _is_standing(rest, idx):
         ref_rot = np.broadcast_to(np.eye(3), rot_f.shape[1:])
     else:
@@ -179,7 +166,7 @@ def retarget(clip: BvhClip, body: SkinnedBody, fps: float | None = None) -> Moti
 
     # Root: the pelvis rotation from the reference, turned so its X axis runs along the hips.
     w_root = delta[:, idx["pelvis"]]
-    w_root = _arc_batch(w_root[:, :, 0], gpos[:, idx["left_thigh"]] - gpos[:, idx["right_thigh"]]) @ w_root
+    w_root = shortest_arc(w_root[:, :, 0], gpos[:, idx["left_thigh"]] - gpos[:, idx["right_thigh"]]) @ w_root
 
     segments: dict[str, tuple[str, str, str]] = {"spine": ("spine_top", "spine_base", "neck"),
                                                   "neck": ("head", "neck", "head")}
@@ -200,12 +187,12 @@ def retarget(clip: BvhClip, body: SkinnedBody, fps: float | None = None) -> Moti
             # A foot is flat in the reference pose: T-pose foot -> the reference foot levelled,
             # then the foot's own rotation (ankle -> toe points down even when the sole is flat).
             ref_dir = ref_dir - ref_dir[1] * np.array([0.0, 1.0, 0.0])
-            w_des = delta[:, idx[drv]] @ _arc_batch(tpose_dir[None], ref_dir[None])[0]
+            w_des = delta[:, idx[drv]] @ shortest_arc(tpose_dir, ref_dir)
         else:
             # T-pose segment -> reference segment -> current segment; the twist from the
             # driving joint's rotation, the direction exactly from the joint positions.
-            w_des = delta[:, idx[drv]] @ _arc_batch(tpose_dir[None], ref_dir[None])[0]
-            w_des = _arc_batch(w_des @ tpose_dir, gpos[:, idx[chi]] - gpos[:, idx[piv]]) @ w_des
+            w_des = delta[:, idx[drv]] @ shortest_arc(tpose_dir, ref_dir)
+            w_des = shortest_arc(w_des @ tpose_dir, gpos[:, idx[chi]] - gpos[:, idx[piv]]) @ w_des
         parent = achieved[joint.parent]
         ang = clamp_joint(j, decompose_joint(j, np.swapaxes(parent, -1, -2) @ w_des))
         start = angle_offset(joint.name)

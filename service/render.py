@@ -57,11 +57,16 @@ class Renderer:
 
         self._o3d = o3d
         self.intrinsics = intrinsics
+        # Open3D aims the ray of pixel (i, j) at (i + 0.5, j + 0.5); ours passes through the
+        # pixel centre (i, j) (OpenCV, as Intrinsics.project), hence the half-pixel shift.
+        k = intrinsics.matrix.copy()
+        k[0, 2] += 0.5
+        k[1, 2] += 0.5
         rays = o3d.t.geometry.RaycastingScene.create_rays_pinhole(
-            o3d.core.Tensor(intrinsics.matrix), o3d.core.Tensor(np.eye(4)), intrinsics.width, intrinsics.height)
+            o3d.core.Tensor(k), o3d.core.Tensor(np.eye(4)), intrinsics.width, intrinsics.height)
         self._rays = rays
-        dirs = rays.numpy()[..., 3:]
-        self._dirs = dirs  # (H, W, 3) with z = 1, so the hit distance t is the depth z
+        self._dirs = rays.numpy()[..., 3:]  # (H, W, 3) with z = 1, so the hit distance t is the depth z
+        self._view = -self._dirs / np.linalg.norm(self._dirs, axis=-1, keepdims=True)
 
     def render(self, vertices: np.ndarray, triangles: np.ndarray, room: Room | None = None
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -83,8 +88,7 @@ class Renderer:
         depth = np.where(valid, t, 0.0).astype(np.float32)
         body = valid & (geom == body_id)
 
-        view = -self._dirs / np.linalg.norm(self._dirs, axis=-1, keepdims=True)
-        shade = AMBIENT + (1 - AMBIENT) * np.abs(np.sum(normals * view, axis=-1))
+        shade = AMBIENT + (1 - AMBIENT) * np.abs(np.sum(normals * self._view, axis=-1))
         albedo = np.zeros(depth.shape + (3,))
         albedo[body] = BODY_ALBEDO
         if room is not None:

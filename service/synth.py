@@ -28,7 +28,7 @@ from .camera import Intrinsics, look_at
 from .depth_noise import KinectNoise
 from .errors import ConfigError, OutputError
 from .joints2d.simulated import SimulatedNoise, person_size, simulate_detections
-from .kinematics import matrix_to_quaternion
+from .kinematics import matrix_to_quaternion, transform_points
 from .model.body import SkinnedBody
 from .model.skeleton import EVAL_JOINTS, LAYOUTS, POSE_DIM
 from .motion import Motion
@@ -58,10 +58,16 @@ class SynthConfig:
         """Raise ConfigError for values no camera or sequence can have."""
         if self.frames < 1:
             raise ConfigError(f"--frames must be at least 1, got {self.frames}")
-        if not self.fps > 0:
-            raise ConfigError(f"--fps must be positive, got {self.fps}")
+        if not 0 < self.fps <= 1000:
+            raise ConfigError(f"--fps must be within 0..1000, got {self.fps}")
+        if self.seed < 0:
+            raise ConfigError(f"--seed must be a non-negative integer, got {self.seed}")
         if not 0.5 <= self.camera_distance <= 8.0:
             raise ConfigError(f"--camera-distance must be within 0.5..8 m, got {self.camera_distance}")
+        if not 0.1 <= self.camera_height <= 3.0:
+            raise ConfigError(f"--camera-height must be within 0.1..3 m, got {self.camera_height}")
+        if not np.isfinite(self.camera_yaw_deg):
+            raise ConfigError(f"--camera-yaw must be a finite number of degrees, got {self.camera_yaw_deg}")
         if self.layout not in LAYOUTS:
             raise ConfigError(f"unknown keypoint layout {self.layout!r}; choose one of {sorted(LAYOUTS)}")
 
@@ -148,12 +154,14 @@ def synthesize(body: SkinnedBody, motion: Motion, out: Path, config: SynthConfig
     }
     (out / "sequence.json").write_text(json.dumps(meta, indent=2))
 
+    by_name = {p: k for k, p in enumerate(body.point_names)}
     bar = Progress("synth", config.frames, enabled=progress)
     person_depth = [np.inf, -np.inf]
     with open(out / "groundtruth.jsonl", "w", encoding="utf-8") as gt:
         for i in range(config.frames):
             h = film.poses[i:i + 1]
-            verts = body.pose(h, config.skinning)[0]
+            transforms = body.transforms(h)
+            verts = body.skin(transforms, config.skinning)[0]
             depth, colour, mask = renderer.render(verts, body.triangles, film.room)
             noisy = config.noise.apply(depth, np.random.default_rng([config.seed, i, 1]))
             seen = noisy[mask & (noisy > 0)]
@@ -162,9 +170,8 @@ def synthesize(body: SkinnedBody, motion: Motion, out: Path, config: SynthConfig
             name = f"{i:06d}.png"
             cv2.imwrite(str(out / "color" / name), cv2.cvtColor(colour, cv2.COLOR_RGB2BGR))
             cv2.imwrite(str(out / "depth" / name), np.round(noisy * 1000.0).astype(np.uint16))
-            pts3 = body.posed_points(h)[0]
+            pts3 = transform_points(body.point_bones, body.point_rest, transforms)[0]
             pts2 = intr.project(pts3)
-            by_name = dict(zip(body.point_names, range(len(body.point_names))))
             det = simulate_detections(
                 layout, {p: pts2[k] for p, k in by_name.items()}, {p: bool(pts3[k, 2] > 0) for p, k in by_name.items()},
                 person_size(pts2), intr, config.detector, config.seed, i)
@@ -174,7 +181,7 @@ def synthesize(body: SkinnedBody, motion: Motion, out: Path, config: SynthConfig
                 "joints2d": {j: pts2[by_name[j]].round(3).tolist() for j in EVAL_JOINTS},
                 "detections": {"layout": layout.name, "keypoints": det},
             }
-            gt.write(json.dumps(record) + "\n")
+            gt.write(json.dumps(record, allow_nan=False) + "\n")
             gt.flush()
             bar.update(i + 1)
     return {"out": str(out), "frames": config.frames, "body": body.name, "motion": motion.name,

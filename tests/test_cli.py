@@ -63,6 +63,15 @@ def test_bad_flags_exit_2():
 
 
 @needs_assets
+def test_out_of_range_numbers_are_clean_errors(tmp_path):
+    base = ("synth", "--motion", "builtin:wave", "--frames", "1", "--out", str(tmp_path / "x"))
+    _assert_clean_error(_run(*base, "--seed", "-1"), "--seed")
+    _assert_clean_error(_run(*base, "--camera-height", "nan"), "--camera-height")
+    _assert_clean_error(_run(*base, "--fps", "0"), "--fps")
+    _assert_clean_error(_run("body", "--lod", "4"), "at least 100")
+    assert not (tmp_path / "x" / "groundtruth.jsonl").exists()
+
+
 def test_more_frames_than_the_clip_has(tmp_path):
     proc = _run("synth", "--motion", str(MOCAP / "makehuman_walk1.bvh"), "--frames", "500", "--out", str(tmp_path))
     _assert_clean_error(proc, "--frames")

@@ -10,8 +10,10 @@ from swarmpose.errors import ShapeError
 from swarmpose.kinematics import (
     Rig,
     axis_angle_matrix,
+    canonical_rotations,
     dual_quaternion_skinning,
     forward_kinematics,
+    joint_rotations,
     linear_blend_skinning,
     matrix_to_quaternion,
     project,
@@ -163,5 +165,21 @@ def test_bad_shapes_raise_with_both_shapes():
         linear_blend_skinning(np.zeros((4, 3)), np.zeros((4, 2), int), np.zeros((4, 3)), np.zeros((1, 2, 3, 4)))
 
 
-def test_angle_count():
-    assert N_ANGLES == 29
+def test_bones_sharing_a_joint_compose_to_the_joint_rotation():
+    """A spine split over k bones (fraction 1/k each) turns the chest exactly like one bone."""
+    rng = np.random.default_rng(11)
+    angles = rng.uniform(-1.0, 1.0, (20, N_ANGLES))
+    spine = JOINT_INDEX["spine"]
+    whole = joint_rotations(angles)[:, spine]
+    for k in (2, 3, 5):
+        frames = canonical_rotations(np.arange(-1, k), np.array([-1] + [spine] * k), np.array([0.0] + [1 / k] * k),
+                                     np.broadcast_to(np.eye(3), (20, 3, 3)), angles)
+        np.testing.assert_allclose(frames[:, -1], whole, atol=1e-9)
+
+
+def test_batched_shortest_arc_handles_opposite_directions():
+    src = np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]])
+    dst = -src
+    rots = shortest_arc(src, dst)
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", rots, src), dst, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(rots), 1.0, atol=1e-12)

@@ -12,7 +12,7 @@ from functools import cached_property
 
 import numpy as np
 
-from ..errors import AssetError, ShapeError, check_shape
+from ..errors import AssetError, ConfigError, ShapeError, check_shape
 from ..kinematics import (
     Rig,
     canonical_rotations,
@@ -25,6 +25,7 @@ from .joint_angles import rest_angles
 from .skeleton import JOINT_INDEX, POINT_NAMES, TRACKING_JOINTS
 
 MAX_INFLUENCES = 4
+MIN_LOD_TRIANGLES = 100
 SKINNING_METHODS = ("lbs", "dqs")
 
 
@@ -85,6 +86,8 @@ class SkinnedBody:
 
     def __post_init__(self) -> None:
         v, b, n = len(self.vertices), len(self.bone_names), len(self.point_names)
+        if v < 4 or len(self.triangles) < 1:
+            raise AssetError(f"{self.name}: a body needs a mesh; got {v} vertices and {len(self.triangles)} triangles")
         check_shape("vertices", self.vertices, (v, 3))
         check_shape("triangles", self.triangles, (None, 3))
         check_shape("skin_indices", self.skin_indices, (v, MAX_INFLUENCES))
@@ -98,11 +101,17 @@ class SkinnedBody:
             raise ShapeError(f"{self.name}: triangle indices out of range 0..{v - 1}")
         if self.skin_indices.min() < 0 or self.skin_indices.max() >= b:
             raise ShapeError(f"{self.name}: skin indices out of range 0..{b - 1}")
+        if not np.all(np.isfinite(self.vertices)):
+            raise ShapeError(f"{self.name}: vertices contain NaN or infinity")
         if not np.allclose(self.skin_weights.sum(axis=1), 1.0, atol=1e-4):
             raise ShapeError(f"{self.name}: skin weights must sum to 1 per vertex")
         missing = [p for p in POINT_NAMES if p not in self.point_names]
         if missing:
             raise AssetError(f"{self.name}: body lacks named points {missing}")
+        for arr in (self.vertices, self.triangles, self.skin_indices, self.skin_weights, self.bone_parents,
+                    self.bone_heads, self.bind_matrices, self.bone_joint, self.bone_fraction, self.point_bones,
+                    self.point_rest):
+            arr.setflags(write=False)  # bodies are cached and shared: nobody may edit them in place
         driven = {int(j) for j in self.bone_joint if j >= 0}
         if driven != set(range(len(TRACKING_JOINTS))):
             lacking = [TRACKING_JOINTS[j].name for j in range(len(TRACKING_JOINTS)) if j not in driven]
@@ -154,10 +163,14 @@ class SkinnedBody:
 
     def pose(self, h: np.ndarray, skinning: str = "lbs") -> np.ndarray:
         """Posed vertices (P, V, 3) in the camera frame for poses (P, 36); ``skinning`` lbs|dqs."""
+        return self.skin(self.transforms(h), skinning)
+
+    def skin(self, transforms: np.ndarray, skinning: str = "lbs") -> np.ndarray:
+        """Skinned vertices (P, V, 3) for bone transforms (P, B, 3, 4); ``skinning`` lbs|dqs."""
         if skinning not in SKINNING_METHODS:
             raise ValueError(f"skinning must be one of {SKINNING_METHODS}, got {skinning!r}")
         fn = linear_blend_skinning if skinning == "lbs" else dual_quaternion_skinning
-        return fn(self.vertices, self.skin_indices, self.skin_weights, self.transforms(h))
+        return fn(self.vertices, self.skin_indices, self.skin_weights, transforms)
 
     def posed_points(self, h: np.ndarray, names=None) -> np.ndarray:
         """Named points (P, N, 3) in the camera frame; ``names`` defaults to all point_names."""
@@ -165,23 +178,22 @@ class SkinnedBody:
         return transform_points(self.point_bones[idx], self.point_rest[idx], self.transforms(h))
 
     # ------------------------------------------------------------------ variants
-    def with_metadata(self, **items) -> SkinnedBody:
-        """A copy with ``metadata`` extended by ``items``."""
-        return replace(self, metadata={**self.metadata, **items})
-
     def tracking_lod(self, triangles: int = 1500) -> SkinnedBody:
         """This body decimated to about ``triangles`` triangles, skinning preserved.
 
         Quadric decimation (Open3D) moves vertices; each new vertex takes the skin weights
         of the nearest original vertex, and the named points and bones are unchanged.
         """
+        if triangles < MIN_LOD_TRIANGLES:
+            raise ConfigError(f"a tracking level of detail needs at least {MIN_LOD_TRIANGLES} triangles, "
+                              f"got {triangles}")
         if triangles >= len(self.triangles):
             return self
         import open3d as o3d
         from scipy.spatial import cKDTree
 
-        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(self.vertices),
-                                         o3d.utility.Vector3iVector(self.triangles.astype(np.int32)))
+        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.array(self.vertices, dtype=np.float64)),
+                                         o3d.utility.Vector3iVector(np.array(self.triangles, dtype=np.int32)))
         low = mesh.simplify_quadric_decimation(target_number_of_triangles=int(triangles))
         low.remove_unreferenced_vertices()
         low.remove_degenerate_triangles()

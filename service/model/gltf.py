@@ -269,7 +269,11 @@ def _skinned_primitive(gltf: gl.GLTF2, path: Path) -> tuple[gl.Node, gl.Primitiv
             continue
         prims = gltf.meshes[node.mesh].primitives
         for prim in prims:
-            if prim.mode in (None, gl.TRIANGLES) and getattr(prim.attributes, "JOINTS_0", None) is not None:
+            attrs = prim.attributes
+            if prim.mode in (None, gl.TRIANGLES) and getattr(attrs, "JOINTS_0", None) is not None:
+                if getattr(attrs, "WEIGHTS_0", None) is None:
+                    raise AssetError(f"{path}: the skinned mesh has JOINTS_0 but no WEIGHTS_0; "
+                                     "re-export it with its skin weights")
                 return node, prim
         if prims and all(p.mode not in (None, gl.TRIANGLES) for p in prims):
             raise AssetError(f"{path}: the skinned mesh is not made of triangles (mode {prims[0].mode}); "

@@ -264,5 +264,5 @@ def load_makehuman(directory: str | Path, preset: str = "neutral") -> SkinnedBod
         point_names=point_names,
         point_bones=np.array([index[points[p][0]] for p in point_names]),
         point_rest=np.stack([points[p][1] for p in point_names]),
-        metadata={"source": "makehuman", "directory": str(root), "preset": preset, "targets": recipe},
+        metadata={"source": "makehuman", "directory": str(root), "preset": preset, "targets": dict(recipe)},
     )
