@@ -104,6 +104,26 @@ def cmd_body(args: argparse.Namespace) -> int:
     return 0
 
 
+def _resolution(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WxH, e.g. 64x64, got {text!r}") from None
+    if not (8 <= w <= 512 and 8 <= h <= 512):
+        raise argparse.ArgumentTypeError(f"tile sides must be within 8..512, got {text!r}")
+    return w, h
+
+
+def cmd_bench_score(args: argparse.Namespace) -> int:
+    """Hypotheses per second of the OpenCL scorer against the Open3D ray-casting baseline."""
+    from .bench import bench_score, format_bench
+
+    result = bench_score(particles=args.particles, resolution=args.resolution, body=args.body, shape=args.shape,
+                         repeats=args.repeats, device=args.device, lod=args.triangles)
+    print(json.dumps(result) if args.json else format_bench(result))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every subcommand."""
     parser = argparse.ArgumentParser(prog="swarmpose", description="markerless 3D human pose tracking for RGBD cameras")
@@ -131,6 +151,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=_positive_int, default=30)
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_demo)
+
+    bench = sub.add_parser("bench", help="benchmarks").add_subparsers(dest="bench", required=True)
+    p = bench.add_parser("score", help="OpenCL scorer vs the Open3D ray-casting baseline, hypotheses per second")
+    _add_body_options(p)
+    p.add_argument("--particles", type=_positive_int, default=64, help="hypotheses per generation")
+    p.add_argument("--resolution", type=_resolution, default=(64, 64), help="depth tile WxH over the person's box")
+    p.add_argument("--triangles", type=_positive_int, default=1500, help="tracking level of detail, triangles")
+    p.add_argument("--repeats", type=_positive_int, default=20, help="timed generations (medians)")
+    p.add_argument("--device", default=None, help="OpenCL device: cpu, gpu, P:D or part of its name "
+                                                  "(default: $SWARMPOSE_CL_DEVICE, else a GPU, else PoCL)")
+    p.add_argument("--json", action="store_true", help="one JSON object")
+    p.set_defaults(func=cmd_bench_score)
 
     p = sub.add_parser("body", help="describe a body model; --export writes it as GLB")
     _add_body_options(p)

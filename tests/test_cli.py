@@ -97,3 +97,13 @@ def test_demo_writes_a_sequence(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path / "demo"), "--frames", "2", "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "wrote 2 frames" in out and (tmp_path / "demo" / "depth" / "000001.png").is_file()
+
+
+def test_bench_score_json_has_the_documented_keys(capsys):
+    assert main(["bench", "score", "--particles", "4", "--resolution", "16x16", "--repeats", "2", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    for key in ("hypotheses_per_s", "baseline_hypotheses_per_s", "ratio", "particles", "resolution", "triangles",
+                "device"):
+        assert key in result
+    assert result["particles"] == 4 and result["resolution"] == [16, 16] and result["max_sum_difference"] < 1e-4
+    assert _run("bench", "score", "--resolution", "64by64").returncode == 2

@@ -1,0 +1,140 @@
+"""Choosing an OpenCL device and making its context and queue.
+
+A device *spec* comes from ``--device`` or the environment variable ``SWARMPOSE_CL_DEVICE``:
+
+* ``None`` / empty: the first GPU if any, else a CPU device (PoCL preferred), else anything;
+* ``cpu`` or ``gpu``: the first device of that type (PoCL first among CPUs);
+* ``P:D``: device ``D`` of platform ``P`` (indices as :func:`list_devices` prints them);
+* anything else: the first device whose device or platform name, vendor or version contains
+  the text (case-insensitive), e.g. ``pocl``, ``nvidia``, ``rtx``.
+
+Nothing matching, or no OpenCL platform at all, raises :class:`DeviceError` listing what is
+available and how to get a CPU device (``pip install pocl-binary-distribution``).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+from .errors import DeviceError
+
+ENV_DEVICE = "SWARMPOSE_CL_DEVICE"
+POCL_HINT = ("install a CPU OpenCL driver with 'pip install pocl-binary-distribution' (Linux) "
+             "or a GPU vendor's OpenCL ICD")
+
+
+@dataclass(frozen=True)
+class DeviceInfo:
+    """One OpenCL device: platform/device indices, names and type ('gpu', 'cpu', 'other')."""
+
+    platform_index: int
+    device_index: int
+    platform: str
+    name: str
+    kind: str
+    search_text: str = ""
+
+    def __str__(self) -> str:
+        return f"{self.platform_index}:{self.device_index} {self.kind} '{self.name}' on '{self.platform}'"
+
+
+def _kind(device) -> str:
+    import pyopencl as cl
+
+    if device.type & cl.device_type.GPU:
+        return "gpu"
+    if device.type & cl.device_type.CPU:
+        return "cpu"
+    return "other"
+
+
+def _platforms() -> list:
+    import pyopencl as cl
+
+    try:
+        return list(cl.get_platforms())
+    except cl.Error as exc:  # no ICD loader entries: PLATFORM_NOT_FOUND_KHR
+        raise DeviceError(f"no OpenCL platform found ({exc}); {POCL_HINT}") from exc
+
+
+def _all_devices() -> list[tuple[DeviceInfo, object]]:
+    import pyopencl as cl
+
+    out = []
+    for pi, plat in enumerate(_platforms()):
+        try:
+            devices = plat.get_devices()
+        except cl.Error:  # a platform without devices
+            continue
+        for di, dev in enumerate(devices):
+            text = " ".join([plat.name, plat.vendor, plat.version, dev.name, dev.vendor]).lower()
+            out.append((DeviceInfo(pi, di, plat.name.strip(), dev.name.strip(), _kind(dev), text), dev))
+    return out
+
+
+def list_devices() -> list[DeviceInfo]:
+    """Every OpenCL device of every platform, in platform/device order."""
+    return [info for info, _ in _all_devices()]
+
+
+def _available(devices) -> str:
+    return "; ".join(str(info) for info, _ in devices) or "none"
+
+
+def choose_device(spec: str | None = None):
+    """The ``pyopencl.Device`` named by ``spec`` (see the module docstring), or ``$SWARMPOSE_CL_DEVICE``."""
+    if spec is None:
+        spec = os.environ.get(ENV_DEVICE) or None
+    devices = _all_devices()
+    if not devices:
+        raise DeviceError(f"OpenCL platforms exist but offer no device; {POCL_HINT}")
+    text = (spec or "").strip().lower()
+    pocl_first = sorted(devices, key=lambda d: "portable computing" not in d[0].platform.lower())
+    if not text:
+        for want in ("gpu", "cpu"):
+            found = [d for info, d in pocl_first if info.kind == want]
+            if found:
+                return found[0]
+        return devices[0][1]
+    if text in ("gpu", "cpu"):
+        found = [d for info, d in pocl_first if info.kind == text]
+        if found:
+            return found[0]
+        raise DeviceError(f"no OpenCL {text.upper()} device (device spec {spec!r}); available: "
+                          f"{_available(devices)}" + ("; " + POCL_HINT if text == "cpu" else ""))
+    if ":" in text:
+        try:
+            pi, di = (int(x) for x in text.split(":", 1))
+        except ValueError:
+            pi = di = None
+        if pi is not None:
+            for info, dev in devices:
+                if (info.platform_index, info.device_index) == (pi, di):
+                    return dev
+            raise DeviceError(f"no OpenCL device {spec!r} (PLATFORM:DEVICE); available: {_available(devices)}")
+    for info, dev in devices:
+        if text in info.search_text:
+            return dev
+    raise DeviceError(f"no OpenCL device matches {spec!r} (use cpu, gpu, PLATFORM:DEVICE or part of a name); "
+                      f"available: {_available(devices)}")
+
+
+_CONTEXTS: dict[int, tuple] = {}
+
+
+def device_context(device):
+    """The shared ``(context, profiling queue)`` of ``device`` (made once per device)."""
+    import pyopencl as cl
+
+    key = device.int_ptr
+    if key not in _CONTEXTS:
+        ctx = cl.Context([device])
+        queue = cl.CommandQueue(ctx, device, properties=cl.command_queue_properties.PROFILING_ENABLE)
+        _CONTEXTS[key] = (ctx, queue)
+    return _CONTEXTS[key]
+
+
+def describe(device) -> str:
+    """``'device name (platform name)'`` for reports."""
+    return f"{device.name.strip()} ({device.platform.name.strip()})"

@@ -1,0 +1,251 @@
+"""``ParticleScorer``: the depth term of every PSO particle in one OpenCL launch.
+
+Per frame, :meth:`ParticleScorer.set_observation` resamples the observed depth inside the
+person's box B to a TW x TH tile (see :mod:`swarmpose.gpu.tile`) and uploads it. Per
+generation, :meth:`ParticleScorer.score` computes the bone transforms of all P particles
+with one vectorised numpy call, uploads them (P x B x 3 x 4 float32), launches
+``cl/score.cl`` once (one work-group per particle: skin, project, rasterise a local
+z-buffer, reduce) and reads back per-particle sums (P,) and counts (P, 4) only.
+
+The per-pixel term is ``min(|d_h - d_o|, T)`` over tile pixels with ``d_o > 0``; where the
+model does not cover a pixel ``d_h = 0`` (the renderer's "no depth"), so the term is
+``min(d_o, T)``, which is ``T`` for every real sensor depth (>= 0.4 m > T = 0.3 m): a
+missed observed pixel costs the full penalty, as the paper implies. Counts (see
+:data:`COUNT_NAMES`) let the objective normalise (E_D = sum / N_P) and compute N_P.
+
+Bad input: zero particles give empty results without a launch; non-finite poses or a
+zero quaternion raise :class:`ShapeError` naming the rows; an all-invalid observation
+gives sums 0 and observed counts 0; a box partly outside the image is clipped to it, one
+wholly outside gives an all-invalid observation. Triangles with a vertex nearer than
+``znear`` are skipped (not clipped). Output buffers are poisoned (NaN / -1) before every
+launch, so a result the kernel did not write cannot pass for a score.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..camera import Intrinsics
+from ..errors import ConfigError, ShapeError
+from ..kinematics import skinning_transforms
+from ..model.body import SkinnedBody
+from ..model.skeleton import POSE_DIM, ROOT_QUATERNION
+from .context import choose_device, describe, device_context
+from .program import build_program
+from .reference import COUNT_NAMES
+from .tile import TileBox, clip_box
+
+__all__ = ["ParticleScorer", "COUNT_NAMES"]
+
+
+class ParticleScorer:
+    """Scores pose hypotheses of one body against one depth tile per frame.
+
+    body: the (tracking level of detail of the) skinned body, used as given; intrinsics:
+    the camera's; tile: (TW, TH) tile pixels; threshold: T in m; device: a
+    ``pyopencl.Device``, a device spec (see :mod:`swarmpose.gpu.context`) or None;
+    cull_backfaces: skip back faces (exact for closed meshes); local_size: work-items per
+    particle (None: 1 on CPUs, 64 on other devices); atomic: use atomic_max on the local
+    z-buffer (None: only when local_size > 1); znear: near plane in m.
+
+    ``last_timings`` holds the split of the last call in seconds: host_s (FK), upload_s,
+    kernel_s and readback_s (OpenCL event times) and wall_s (enqueue to results). One
+    scorer serves one thread at a time.
+    """
+
+    def __init__(self, body: SkinnedBody, intrinsics: Intrinsics, tile: tuple[int, int] = (64, 64),
+                 threshold: float = 0.30, device=None, cull_backfaces: bool = True,
+                 local_size: int | None = None, atomic: bool | None = None, znear: float = 0.05):
+        import pyopencl as cl
+
+        self._cl = cl
+        self.body = body
+        self.intrinsics = intrinsics
+        self.tw, self.th = (int(x) for x in tile)
+        if self.tw < 1 or self.th < 1:
+            raise ConfigError(f"tile size {tile} must be at least 1x1 pixels")
+        if not (np.isfinite(threshold) and threshold > 0):
+            raise ConfigError(f"threshold T = {threshold} m must be positive")
+        self.threshold = float(threshold)
+        if len(body.triangles) == 0:
+            raise ShapeError(f"{body.name}: the body has no triangles to render")
+        self.device = device if isinstance(device, cl.Device) else choose_device(device)
+        self.context, self.queue = device_context(self.device)
+        is_cpu = bool(self.device.type & cl.device_type.CPU)
+        wg = int(local_size or (1 if is_cpu else 64))
+        if wg < 1 or wg & (wg - 1) or wg > self.device.max_work_group_size:
+            raise ConfigError(f"local_size {wg} must be a power of two <= {self.device.max_work_group_size}")
+        self.local_size = wg
+        self.atomic = bool(wg > 1 if atomic is None else atomic)
+        if wg > 1 and not self.atomic:
+            raise ConfigError("local_size > 1 needs atomic=True (work-items share the z-buffer)")
+        nv, nf, nb = len(body.vertices), len(body.triangles), len(body.bone_names)
+        need = nb * 48 + nv * 24 + self.tw * self.th * 4 + (wg * 20 if wg > 1 else nf * 4)
+        if need > self.device.local_mem_size:
+            raise ConfigError(f"{body.name} ({nv} vertices) with a {self.tw}x{self.th} tile needs {need} bytes of "
+                              f"local memory, {describe(self.device)} has {self.device.local_mem_size}; "
+                              "use a smaller tracking LOD (body.tracking_lod) or tile")
+        self.defines = {"NV": nv, "NF": nf, "NB": nb, "TW": self.tw, "TH": self.th, "WG": wg,
+                        "ZATOMIC": self.atomic, "CULL": bool(cull_backfaces), "ZNEAR": float(znear)}
+        self._mesh = self._upload_mesh(body)
+        self._capacity = 0
+        self._tile_box: TileBox | None = None
+        self._observed: np.ndarray | None = None
+        self._obs_buf = None
+        self._tiles_buf = None
+        self._kernels: dict[bool, object] = {}
+        self.last_timings: dict[str, float] = {}
+
+    # ------------------------------------------------------------------ setup
+    def _upload_mesh(self, body: SkinnedBody) -> dict:
+        cl = self._cl
+        mf = cl.mem_flags
+        nv = len(body.vertices)
+        rest = np.zeros((nv, 4), np.float32)
+        rest[:, :3] = body.vertices
+        tris = np.zeros((len(body.triangles), 4), np.int32)
+        tris[:, :3] = body.triangles
+        arrays = {"rest": rest, "idx": np.ascontiguousarray(body.skin_indices, np.int32),
+                  "w": np.ascontiguousarray(body.skin_weights, np.float32), "tris": tris}
+        return {k: cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a) for k, a in arrays.items()}
+
+    def _kernel(self, write_tiles: bool):
+        if write_tiles not in self._kernels:
+            prg = build_program(self.context, "score.cl", {**self.defines, "WRITE_TILES": write_tiles})
+            self._kernels[write_tiles] = prg.score_particles
+        return self._kernels[write_tiles]
+
+    def _ensure_capacity(self, p: int, tiles: bool) -> None:
+        cl = self._cl
+        if p > self._capacity:
+            cap = max(p, 2 * self._capacity, 16)
+            nb = self.defines["NB"]
+            self._bones_buf = cl.Buffer(self.context, cl.mem_flags.READ_ONLY, cap * nb * 48)
+            self._sums_buf = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, cap * 4)
+            self._counts_buf = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, cap * 16)
+            self._tiles_buf = None
+            self._capacity = cap
+        if tiles and self._tiles_buf is None:
+            self._tiles_buf = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, self._capacity * self.tw * self.th * 4)
+
+    # ------------------------------------------------------------------ per frame
+    def set_observation(self, depth: np.ndarray, box) -> None:
+        """Upload the observation of a frame: depth (H, W) m (0 / NaN = none) at the
+        intrinsics' size, box (u0, v0, bw, bh) pixels, clipped to the image."""
+        depth = np.asarray(depth)
+        shape = (self.intrinsics.height, self.intrinsics.width)
+        if depth.shape != shape:
+            raise ShapeError(f"depth has shape {depth.shape}, expected {shape} (the intrinsics' height, width)")
+        clipped = clip_box(box, self.intrinsics.width, self.intrinsics.height)
+        if clipped is None:  # wholly outside: keep the box, observe nothing
+            tb = TileBox(*(float(x) for x in box), self.tw, self.th)
+            observed = np.zeros((self.th, self.tw), np.float32)
+        else:
+            tb = TileBox(*clipped, self.tw, self.th)
+            observed = tb.resample(depth)
+        self._tile_box, self._observed = tb, observed
+        cl = self._cl
+        if self._obs_buf is None:
+            self._obs_buf = cl.Buffer(self.context, cl.mem_flags.READ_ONLY, observed.nbytes)
+        cl.enqueue_copy(self.queue, self._obs_buf, observed, is_blocking=True)
+        self._proj = np.array(tb.projection(self.intrinsics), dtype=np.float32)
+
+    @property
+    def tile_box(self) -> TileBox | None:
+        """The (clipped) box of the current observation, or None before the first."""
+        return self._tile_box
+
+    @property
+    def observed(self) -> np.ndarray | None:
+        """The current observation tile (TH, TW) float32 m, 0 = none."""
+        return self._observed
+
+    # ------------------------------------------------------------------ per generation
+    def transforms(self, h: np.ndarray) -> np.ndarray:
+        """Validated poses (P, 36) -> bone transforms (P, B, 3, 4) float32 (one numpy call)."""
+        h = np.asarray(h, dtype=np.float64)
+        if h.ndim != 2 or h.shape[1] != POSE_DIM:
+            raise ShapeError(f"poses have shape {h.shape}, expected (P, {POSE_DIM})")
+        if len(h) == 0:
+            return np.zeros((0, self.defines["NB"], 3, 4), np.float32)
+        bad = ~np.all(np.isfinite(h), axis=1) | (np.linalg.norm(h[:, ROOT_QUATERNION], axis=1) < 1e-9)
+        if np.any(bad):
+            rows = np.flatnonzero(bad)
+            raise ShapeError(f"poses {rows[:10].tolist()} have non-finite values or a zero root quaternion; "
+                             "every pose needs finite numbers and a non-zero quaternion")
+        return skinning_transforms(self.body.rig, h).astype(np.float32)
+
+    def score(self, h: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Depth-term sums (P,) float64 (m, summed over observed tile pixels) and counts
+        {name: (P,) int64} (:data:`COUNT_NAMES`) for poses h (P, 36)."""
+        t0 = time.perf_counter()
+        transforms = self.transforms(h)
+        host = time.perf_counter() - t0
+        sums, counts, _ = self._launch(transforms, write_tiles=False)
+        self.last_timings["host_s"] = host
+        return sums, counts
+
+    def score_transforms(self, transforms: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """As :meth:`score`, from precomputed bone transforms (P, B, 3, 4) (camera frame)."""
+        transforms = np.asarray(transforms, np.float32)
+        if not np.all(np.isfinite(transforms)):
+            raise ShapeError("bone transforms contain non-finite values")
+        sums, counts, _ = self._launch(transforms, write_tiles=False)
+        return sums, counts
+
+    def render_and_score(self, h: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        """Debug path: rendered depth tiles (P, TH, TW) float32 m (0 = background), sums, counts."""
+        sums, counts, tiles = self._launch(self.transforms(h), write_tiles=True)
+        return tiles, sums, counts
+
+    def render(self, h: np.ndarray) -> np.ndarray:
+        """Rendered depth tiles (P, TH, TW) float32 m, 0 = background (debug path)."""
+        return self.render_and_score(h)[0]
+
+    def _launch(self, transforms: np.ndarray, write_tiles: bool):
+        cl = self._cl
+        if self._obs_buf is None:
+            raise ConfigError("call set_observation(depth, box) before scoring")
+        p, nb = len(transforms), self.defines["NB"]
+        if transforms.ndim != 4 or transforms.shape[1:] != (nb, 3, 4):
+            raise ShapeError(f"transforms have shape {transforms.shape}, expected (P, {nb}, 3, 4)")
+        if p == 0:
+            self.last_timings = {"host_s": 0.0, "upload_s": 0.0, "kernel_s": 0.0, "readback_s": 0.0, "wall_s": 0.0}
+            empty = np.zeros((0, self.th, self.tw), np.float32) if write_tiles else None
+            return np.zeros(0), {k: np.zeros(0, np.int64) for k in COUNT_NAMES}, empty
+        t1 = time.perf_counter()
+        self._ensure_capacity(p, write_tiles)
+        bones = np.ascontiguousarray(transforms, dtype=np.float32)
+        q = self.queue
+        up = cl.enqueue_copy(q, self._bones_buf, bones, is_blocking=False)
+        cl.enqueue_fill_buffer(q, self._sums_buf, np.float32(np.nan), 0, p * 4)
+        cl.enqueue_fill_buffer(q, self._counts_buf, np.int32(-1), 0, p * 16)
+        npix = self.tw * self.th
+        if write_tiles:
+            cl.enqueue_fill_buffer(q, self._tiles_buf, np.float32(np.nan), 0, p * npix * 4)
+        kernel = self._kernel(write_tiles)
+        m = self._mesh
+        kernel.set_args(self._bones_buf, m["rest"], m["idx"], m["w"], m["tris"], self._obs_buf,
+                        self._proj, np.float32(self.threshold), self._sums_buf, self._counts_buf,
+                        self._tiles_buf if write_tiles else self._sums_buf)
+        wg = self.local_size
+        run = cl.enqueue_nd_range_kernel(q, kernel, (p * wg,), (wg,))
+        sums = np.empty(p, np.float32)
+        counts = np.empty((p, 4), np.int32)
+        down = [cl.enqueue_copy(q, sums, self._sums_buf, is_blocking=False),
+                cl.enqueue_copy(q, counts, self._counts_buf, is_blocking=False)]
+        tiles = None
+        if write_tiles:
+            tiles = np.empty((p, self.th, self.tw), np.float32)
+            down.append(cl.enqueue_copy(q, tiles, self._tiles_buf, is_blocking=False))
+        cl.wait_for_events(down)
+        wall = time.perf_counter() - t1
+
+        def dur(ev) -> float:
+            return (ev.profile.end - ev.profile.start) * 1e-9
+
+        self.last_timings = {"host_s": 0.0, "upload_s": dur(up), "kernel_s": dur(run),
+                             "readback_s": sum(dur(e) for e in down), "wall_s": wall}
+        return sums.astype(np.float64), {k: counts[:, i].astype(np.int64) for i, k in enumerate(COUNT_NAMES)}, tiles
