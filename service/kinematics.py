@@ -130,23 +130,31 @@ def rotation_power(rot: np.ndarray, fraction: float) -> np.ndarray:
                                                 axis * np.sin(fraction * half)[..., None]], -1))
 
 
+def compose_joint(joint, angles: np.ndarray) -> np.ndarray:
+    """Canonical rotation ``E = R(compose[0]) R(compose[1]) ...`` (..., 3, 3) of one tracking
+    joint (a :class:`~swarmpose.model.skeleton.TrackingJoint`) from its angles (..., n_dofs)
+    in pose-vector DOF order, rad."""
+    kinds = [d.kind for d in joint.dofs]
+    rot = None
+    for kind in joint.compose:
+        k = kinds.index(kind)
+        step = axis_angle_matrix(joint.dofs[k].axis, angles[..., k])
+        rot = step if rot is None else rot @ step
+    return rot
+
+
 def joint_rotations(angles: np.ndarray, fraction: float = 1.0) -> np.ndarray:
     """Canonical-frame joint rotations ``E_j`` (P, 14, 3, 3) from angles (P, 29) rad.
 
-    ``E_j = R(compose[0]) R(compose[1]) ...`` of the joint's DOFs (see skeleton). With
-    ``fraction`` f < 1 it returns ``E_j ** f`` (same axis, f of the angle), so that k bones
-    sharing a joint with f = 1/k compose to exactly ``E_j``.
+    ``E_j`` is :func:`compose_joint` of the joint's DOFs (see skeleton). With ``fraction``
+    f < 1 it returns ``E_j ** f`` (same axis, f of the angle), so that k bones sharing a
+    joint with f = 1/k compose to exactly ``E_j``.
     """
     angles = np.asarray(angles, dtype=np.float64)
     out = np.empty(angles.shape[:-1] + (len(TRACKING_JOINTS), 3, 3))
     for ji, joint in enumerate(TRACKING_JOINTS):
         first = angle_offset(joint.name)
-        kinds = [d.kind for d in joint.dofs]
-        rot = np.broadcast_to(np.eye(3), angles.shape[:-1] + (3, 3))
-        for kind in joint.compose:
-            k = kinds.index(kind)
-            rot = rot @ axis_angle_matrix(joint.dofs[k].axis, angles[..., first + k])
-        out[..., ji, :, :] = rot
+        out[..., ji, :, :] = compose_joint(joint, angles[..., first:first + len(joint.dofs)])
     return out if fraction == 1.0 else rotation_power(out, fraction)
 
 
@@ -179,10 +187,17 @@ class Rig:
             raise ShapeError("rig.parents must list bones in topological order with the root first")
 
 
-def _as_poses(h: np.ndarray) -> np.ndarray:
+def as_poses(h: np.ndarray) -> np.ndarray:
+    """Poses (P, 36) as float64, or a ShapeError for a wrong shape, non-finite values or a
+    zero root quaternion (naming the offending rows)."""
     h = np.asarray(h, dtype=np.float64)
     if h.ndim != 2 or h.shape[1] != POSE_DIM:
         raise ShapeError(f"poses have shape {h.shape}, expected (P, {POSE_DIM})")
+    bad = ~np.all(np.isfinite(h), axis=1) | (np.linalg.norm(h[:, ROOT_QUATERNION], axis=1) < 1e-9)
+    if np.any(bad):
+        rows = np.flatnonzero(bad)
+        raise ShapeError(f"poses {rows[:10].tolist()} have non-finite values or a zero root quaternion; "
+                         "every pose needs finite numbers and a non-zero quaternion")
     return h
 
 
@@ -194,7 +209,8 @@ def canonical_rotations(parents: np.ndarray, bone_joint: np.ndarray, bone_fracti
     equals the root's: zero angles are the T-pose of :mod:`swarmpose.model.skeleton`.
     """
     p, b = angles.shape[0], len(parents)
-    cache: dict[float, np.ndarray] = {}
+    full = joint_rotations(angles)  # every joint once; bones sharing a joint take a power of it
+    shared: dict[tuple[int, float], np.ndarray] = {}
     rot = np.empty((p, b, 3, 3))
     rot[:, 0] = root
     for bone in range(1, b):
@@ -204,9 +220,13 @@ def canonical_rotations(parents: np.ndarray, bone_joint: np.ndarray, bone_fracti
             rot[:, bone] = rot[:, par]
             continue
         f = float(bone_fraction[bone])
-        if f not in cache:
-            cache[f] = joint_rotations(angles, f)
-        rot[:, bone] = rot[:, par] @ cache[f][:, j]
+        if f == 1.0:
+            local = full[:, j]
+        else:
+            if (j, f) not in shared:
+                shared[(j, f)] = rotation_power(full[:, j], f)
+            local = shared[(j, f)]
+        rot[:, bone] = rot[:, par] @ local
     return rot
 
 
@@ -218,7 +238,7 @@ def forward_kinematics(rig: Rig, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     The root bone's head goes to ``h[0:3]``; the quaternion ``h[3:7]`` turns the body
     frame into the camera frame.
     """
-    h = _as_poses(h)
+    h = as_poses(h)
     root = quaternion_to_matrix(h[:, ROOT_QUATERNION])
     frames = canonical_rotations(rig.parents, rig.bone_joint, rig.bone_fraction, root, h[:, ANGLES])
     rot = frames @ np.swapaxes(rig.rest_frames, -1, -2)

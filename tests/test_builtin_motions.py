@@ -182,3 +182,28 @@ def test_bad_frame_count(frames):
 def test_bad_fps(fps):
     with pytest.raises(ConfigError, match="fps"):
         builtin_motion("wave", 10, fps)
+
+
+def test_motions_mean_what_they_say_on_a_posed_body():
+    """Oracle independent of the generator's angle values: pose the built-in body and look."""
+    from swarmpose.kinematics import matrix_to_quaternion
+    from swarmpose.model.parametric import build_parametric_body
+
+    body = build_parametric_body()
+
+    def points(m, names):
+        h = np.zeros((len(m), 36))
+        h[:, :3], h[:, 3:7], h[:, 7:] = m.root_offset, matrix_to_quaternion(m.root_rotation), m.angles
+        return dict(zip(names, np.moveaxis(body.posed_points(h, names), 1, 0)))
+
+    wave = points(builtin_motion("wave", 30), ["right_wrist", "head", "left_wrist", "left_hip"])
+    assert np.all(wave["right_wrist"][:, 1] > wave["head"][:, 1])  # the waving hand is above the head
+    assert np.all(wave["left_wrist"][:, 1] < wave["left_hip"][:, 1] + 0.1)  # the other arm hangs
+    period = int(PERIODS["jumping_jacks"] * FPS)
+    jj = points(builtin_motion("jumping_jacks", period + 1, FPS), ["left_wrist", "right_wrist", "head"])
+    up = period // 2
+    assert jj["left_wrist"][up, 1] > jj["head"][up, 1] and jj["right_wrist"][up, 1] > jj["head"][up, 1]
+    assert jj["left_wrist"][0, 1] < jj["head"][0, 1] - 0.5
+    walk = points(builtin_motion("walk", int(PERIODS["walk"] * FPS), FPS), ["left_knee", "left_hip"])
+    lift = int(PERIODS["walk"] * FPS) // 4  # sin peak: the left leg lifted
+    assert walk["left_knee"][lift, 2] > walk["left_hip"][lift, 2] + 0.15  # the knee swings forward

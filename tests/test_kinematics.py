@@ -183,3 +183,11 @@ def test_batched_shortest_arc_handles_opposite_directions():
     rots = shortest_arc(src, dst)
     np.testing.assert_allclose(np.einsum("nij,nj->ni", rots, src), dst, atol=1e-12)
     np.testing.assert_allclose(np.linalg.det(rots), 1.0, atol=1e-12)
+
+
+def test_non_finite_poses_and_zero_quaternions_are_rejected_by_row():
+    h = np.tile(_identity_pose(), (4, 1))
+    h[1, 9] = np.nan
+    h[3, 3:7] = 0.0
+    with pytest.raises(ShapeError, match=r"poses \[1, 3\]"):
+        forward_kinematics(_arm_rig(), h)

@@ -29,9 +29,8 @@ import numpy as np
 
 from ..camera import Intrinsics
 from ..errors import ConfigError, ShapeError
-from ..kinematics import skinning_transforms
+from ..kinematics import as_poses, skinning_transforms
 from ..model.body import SkinnedBody
-from ..model.skeleton import POSE_DIM, ROOT_QUATERNION
 from .context import choose_device, describe, device_context
 from .program import build_program
 from .reference import COUNT_NAMES
@@ -165,16 +164,9 @@ class ParticleScorer:
     # ------------------------------------------------------------------ per generation
     def transforms(self, h: np.ndarray) -> np.ndarray:
         """Validated poses (P, 36) -> bone transforms (P, B, 3, 4) float32 (one numpy call)."""
-        h = np.asarray(h, dtype=np.float64)
-        if h.ndim != 2 or h.shape[1] != POSE_DIM:
-            raise ShapeError(f"poses have shape {h.shape}, expected (P, {POSE_DIM})")
+        h = as_poses(h)
         if len(h) == 0:
             return np.zeros((0, self.defines["NB"], 3, 4), np.float32)
-        bad = ~np.all(np.isfinite(h), axis=1) | (np.linalg.norm(h[:, ROOT_QUATERNION], axis=1) < 1e-9)
-        if np.any(bad):
-            rows = np.flatnonzero(bad)
-            raise ShapeError(f"poses {rows[:10].tolist()} have non-finite values or a zero root quaternion; "
-                             "every pose needs finite numbers and a non-zero quaternion")
         return skinning_transforms(self.body.rig, h).astype(np.float32)
 
     def score(self, h: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:

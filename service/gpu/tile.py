@@ -23,6 +23,12 @@ from ..camera import Intrinsics
 from ..errors import ConfigError, ShapeError
 
 
+def _check_box(u0: float, v0: float, bw: float, bh: float) -> None:
+    vals = (u0, v0, bw, bh)
+    if not all(math.isfinite(float(x)) for x in vals) or bw <= 0 or bh <= 0:
+        raise ConfigError(f"box (u0, v0, width, height) = {vals} must be finite with positive size")
+
+
 @dataclass(frozen=True)
 class TileBox:
     """An image-space box (u0, v0, bw, bh) in pixels sampled by a tile of tw x th pixels."""
@@ -35,9 +41,7 @@ class TileBox:
     th: int
 
     def __post_init__(self) -> None:
-        vals = (self.u0, self.v0, self.bw, self.bh)
-        if not all(math.isfinite(float(x)) for x in vals) or self.bw <= 0 or self.bh <= 0:
-            raise ConfigError(f"box (u0, v0, width, height) = {vals} must be finite with positive size")
+        _check_box(self.u0, self.v0, self.bw, self.bh)
         if self.tw < 1 or self.th < 1:
             raise ConfigError(f"tile size {self.tw}x{self.th} must be at least 1x1")
 
@@ -89,8 +93,7 @@ def clip_box(box, width: int, height: int) -> tuple[float, float, float, float] 
         u0, v0, bw, bh = (float(x) for x in box)
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"box must be (u0, v0, width, height) in pixels, got {box!r}") from exc
-    if not all(math.isfinite(x) for x in (u0, v0, bw, bh)) or bw <= 0 or bh <= 0:
-        raise ConfigError(f"box (u0, v0, width, height) = {(u0, v0, bw, bh)} must be finite with positive size")
+    _check_box(u0, v0, bw, bh)
     a, b = max(u0, 0.0), min(u0 + bw, float(width))
     c, d = max(v0, 0.0), min(v0 + bh, float(height))
     if a >= b or c >= d:

@@ -13,7 +13,7 @@ from collections.abc import Callable
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..kinematics import joint_rotations, shortest_arc
+from ..kinematics import compose_joint, shortest_arc
 from .skeleton import ANGLE_LIMITS, N_ANGLES, TRACKING_JOINTS, angle_offset
 
 _AXIS_LETTER = {0: "X", 1: "Y", 2: "Z"}
@@ -35,10 +35,7 @@ TOPOLOGICAL_ORDER: tuple[int, ...] = tuple(
 
 def joint_rotation(joint_index: int, angles: np.ndarray) -> np.ndarray:
     """Canonical rotation ``E_j`` (N, 3, 3) of one joint from its angles (N, n_dofs)."""
-    full = np.zeros((len(angles), N_ANGLES))
-    start = angle_offset(TRACKING_JOINTS[joint_index].name)
-    full[:, start:start + angles.shape[1]] = angles
-    return joint_rotations(full)[:, joint_index]
+    return compose_joint(TRACKING_JOINTS[joint_index], np.asarray(angles, dtype=np.float64))
 
 
 def decompose_joint(joint_index: int, rotation: np.ndarray) -> np.ndarray:
