@@ -124,6 +124,15 @@ def cmd_bench_score(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_detect(args: argparse.Namespace) -> int:
+    """Time per frame and COCO-photo error of the ONNX 2D detectors."""
+    from .bench_detect import bench_detectors, format_detect_bench
+
+    result = bench_detectors(repeats=args.repeats, assets=args.assets, threads=args.threads)
+    print(json.dumps(result) if args.json else format_detect_bench(result))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every subcommand."""
     parser = argparse.ArgumentParser(prog="swarmpose", description="markerless 3D human pose tracking for RGBD cameras")
@@ -163,6 +172,17 @@ def build_parser() -> argparse.ArgumentParser:
                                                   "(default: $SWARMPOSE_CL_DEVICE, else a GPU, else PoCL)")
     p.add_argument("--json", action="store_true", help="one JSON object")
     p.set_defaults(func=cmd_bench_score)
+    p = bench.add_parser("detect", help="ONNX 2D detectors: time per frame and error on a COCO photo")
+    p.add_argument("--repeats", type=_positive_int, default=20, help="timed runs per detector and image (medians)")
+    p.add_argument("--threads", type=_positive_int, default=None, help="onnxruntime threads (default: half the cores)")
+    p.add_argument("--assets", default=None,
+                   help="shared assets folder (default: $SWARMPOSE_ASSETS or ../shared/assets)")
+    p.add_argument("--json", action="store_true", help="one JSON object")
+    p.set_defaults(func=cmd_bench_detect)
+
+    from .cli_track import add_track_commands
+
+    add_track_commands(sub, _add_body_options, _positive_int, _resolution)
 
     p = sub.add_parser("body", help="describe a body model; --export writes it as GLB")
     _add_body_options(p)

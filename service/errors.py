@@ -42,3 +42,15 @@ def check_shape(name: str, array, expected: tuple) -> None:
     if not ok:
         pretty = "(" + ", ".join("N" if e is None else str(e) for e in expected) + ")"
         raise ShapeError(f"{name} has shape {shape}, expected {pretty}")
+
+
+class SourceError(SwarmposeError):
+    """A frame source (camera, recording, folder) cannot be opened or read."""
+
+
+class DetectorError(SwarmposeError):
+    """A 2D joint detector cannot be built or fails on a frame."""
+
+
+class TrackingError(SwarmposeError):
+    """The tracker was given inputs it cannot work with (e.g. an observation of the wrong size)."""

@@ -113,7 +113,7 @@ class ParticleScorer:
     def _kernel(self, write_tiles: bool):
         if write_tiles not in self._kernels:
             prg = build_program(self.context, "score.cl", {**self.defines, "WRITE_TILES": write_tiles})
-            self._kernels[write_tiles] = prg.score_particles
+            self._kernels[write_tiles] = self._cl.Kernel(prg, "score_particles")  # one per scorer
         return self._kernels[write_tiles]
 
     def _ensure_capacity(self, p: int, tiles: bool) -> None:

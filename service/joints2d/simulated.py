@@ -22,7 +22,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ..camera import Intrinsics
-from ..model.skeleton import KeypointLayout
+from ..errors import DetectorError
+from ..model.skeleton import LAYOUTS, KeypointLayout
+from .base import Joints2D
 
 
 @dataclass(frozen=True)
@@ -97,3 +99,41 @@ def simulate_detections(layout: KeypointLayout, points: dict[str, np.ndarray], d
     ok = present & ~is_missing & inside
     return {name: ([float(xy[i, 0]), float(xy[i, 1]), float(score[i])] if ok[i] else [0.0, 0.0, 0.0])
             for i, name in enumerate(layout.keypoints)}
+
+
+class SimulatedDetector:
+    """The detector ``simulated``: replays the detections ``swarmpose synth`` recorded in ``groundtruth.jsonl``.
+
+    ground_truth: the sequence's :class:`~swarmpose.groundtruth.GroundTruth` (a folder
+    source's ``.ground_truth``). ``detect(frame)`` returns the keypoints (K, 3) x px, y px,
+    score that the noise model above produced for ``frame.index`` at synth time; ``box`` is ignored.
+    """
+
+    def __init__(self, ground_truth, source_name: str = "the source"):
+        if ground_truth is None:
+            raise DetectorError(f"--joints simulated needs a `swarmpose synth` sequence folder with groundtruth.jsonl "
+                                f"as --source; {source_name} has no ground truth. Use onnx:MODEL or "
+                                "openpose-json:DIR for other sources")
+        layouts = {d[0] for d in ground_truth.detections if d is not None}
+        if not layouts:
+            raise DetectorError(f"the ground truth of {source_name} records no simulated detections; "
+                                "re-run `swarmpose synth` to rewrite the sequence")
+        if len(layouts) > 1:
+            raise DetectorError(f"the ground truth of {source_name} mixes keypoint layouts {sorted(layouts)}")
+        self.ground_truth = ground_truth
+        self.layout = LAYOUTS[layouts.pop()]
+        self.name = "simulated"
+        self.source_name = source_name
+
+    def detect(self, frame, box: np.ndarray | None = None) -> Joints2D:
+        """The recorded detections of ``frame.index`` as :class:`~swarmpose.joints2d.base.Joints2D`."""
+        try:
+            det = self.ground_truth.detections[self.ground_truth.row(int(frame.index))]
+        except KeyError:
+            raise DetectorError(f"simulated: {self.source_name} has no ground-truth record for frame "
+                                f"{frame.index}") from None
+        keypoints = np.zeros((len(self.layout.keypoints), 3)) if det is None else np.array(det[1], dtype=np.float64)
+        return Joints2D(self.layout, keypoints, int(frame.index), int(frame.timestamp_ns))
+
+    def close(self) -> None:
+        """Nothing to release."""

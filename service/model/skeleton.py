@@ -252,7 +252,13 @@ BLAZEPOSE33 = KeypointLayout(
           {"left_foot_index": "left_toe", "right_foot_index": "right_toe"}.get(k, k) for k in _BLAZE),
 )
 
-LAYOUTS: dict[str, KeypointLayout] = {lay.name: lay for lay in (COCO17, BODY25, BLAZEPOSE33)}
+_OPENPOSE18 = ("nose", "neck", "right_shoulder", "right_elbow", "right_wrist", "left_shoulder", "left_elbow",
+               "left_wrist", "right_hip", "right_knee", "right_ankle", "left_hip", "left_knee", "left_ankle",
+               "right_eye", "left_eye", "right_ear", "left_ear")
+OPENPOSE18 = KeypointLayout("openpose18", _OPENPOSE18, _OPENPOSE18)
+"""OpenPose's COCO model (18 points: COCO-17 plus the neck, in OpenPose's order)."""
+
+LAYOUTS: dict[str, KeypointLayout] = {lay.name: lay for lay in (COCO17, BODY25, BLAZEPOSE33, OPENPOSE18)}
 
 
 def neutral_pose(translation=(0.0, 0.0, 3.0), quaternion=(0.0, 1.0, 0.0, 0.0)) -> np.ndarray:

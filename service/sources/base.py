@@ -1,0 +1,119 @@
+"""The frame-source protocol shared by every reader.
+
+A :class:`Frame` is one synchronised RGBD capture in swarmpose's conventions: depth float32
+metres with 0 = no measurement, colour uint8 RGB of the same size (depth registered to
+colour), the pinhole intrinsics of both, the capture time in ns and the frame index.
+A :class:`FrameSource` yields frames (or :class:`SkippedFrame` where one could not be read);
+it is a context manager and an iterator.
+
+Failure policy (every source): a source that cannot be opened raises
+:class:`~swarmpose.errors.SourceError` (or ``ConfigError`` for a malformed URI) from its
+constructor, and so does a failure before the first frame. Once a frame has been delivered,
+a failure never raises into the caller: a single unreadable frame is yielded as a
+:class:`SkippedFrame` and iteration goes on; a failure of the whole source (file truncated,
+device gone, reads timing out) ends the iteration with ``status`` set to ``"error: …"``.
+Live devices first try to reconnect, at most :data:`MAX_RECONNECTS` times, yielding a
+:class:`SkippedFrame` for each failed read. :meth:`FrameSource.__iter__` enforces this for
+every subclass.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..camera import Intrinsics
+from ..errors import SourceError, SwarmposeError
+
+MAX_RECONNECTS = 3
+"""How often a live source tries to reopen its device after a failed read before it gives up."""
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One RGBD frame.
+
+    depth: (H, W) float32 metres, 0 = invalid; color: (H, W, 3) uint8 RGB or None;
+    intrinsics: pinhole of both images (depth is registered to colour);
+    timestamp_ns: capture time (ns, source clock); index: 0-based frame number in the source.
+    """
+
+    index: int
+    timestamp_ns: int
+    depth: np.ndarray
+    color: np.ndarray | None
+    intrinsics: Intrinsics
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) in pixels."""
+        return int(self.depth.shape[1]), int(self.depth.shape[0])
+
+
+@dataclass(frozen=True)
+class SkippedFrame:
+    """A frame the source could not deliver (missing or corrupt file, dropped by the device).
+
+    Sources yield it in place of the :class:`Frame` so consumers can report the frame as
+    skipped, with ``reason`` naming the file or the failure, and go on.
+    """
+
+    index: int
+    timestamp_ns: int
+    reason: str
+
+
+class FrameSource:
+    """Base class of frame sources. Subclasses implement :meth:`_frames` and may override :meth:`close`.
+
+    Attributes: ``uri`` (what the user passed to ``--source``), ``length`` (frames, None when
+    unknown or live), ``status`` (a short human-readable state: "open", "ended", "error: …").
+    """
+
+    uri: str = ""
+    length: int | None = None
+    status: str = "open"
+
+    def _frames(self) -> Iterator[Frame | SkippedFrame]:
+        raise NotImplementedError
+
+    def __iter__(self) -> Iterator[Frame | SkippedFrame]:
+        """The frames of :meth:`_frames` under the failure policy of this module's docstring."""
+        delivered = False
+        try:
+            for item in self._frames():
+                delivered = delivered or isinstance(item, Frame)
+                yield item
+        except Exception as exc:  # the policy: nothing escapes after the first frame
+            message = exc_message(exc)
+            if not delivered:
+                self.status = f"error: {message}"
+                if isinstance(exc, SwarmposeError):
+                    raise
+                raise SourceError(f"{self.uri or type(self).__name__}: {message}") from exc
+            self.status = f"error: {message}"
+            return
+        if not self.status.startswith("error"):
+            self.status = "ended"
+
+    def close(self) -> None:
+        """Release files and devices; safe to call twice."""
+
+    def __enter__(self) -> FrameSource:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+
+
+def exc_message(exc: BaseException) -> str:
+    """One line from an exception (Open3D's colour codes and source locations removed)."""
+    text = _ANSI.sub("", str(exc)).strip() or type(exc).__name__
+    text = re.sub(r"^\[Open3D \w+\] .*? \S+\.(?:cpp|h):\d+: ", "", text, flags=re.S)
+    return " ".join(text.split())
