@@ -5,7 +5,9 @@ Per frame (:meth:`Tracker.step`):
 1. The detection's joints (score >= ``min_score``) are lifted to J^e on the depth.
 2. **Start**. With a previous solution (state *tracking*), particles start around it in a
    region that contains J^e: translations within ±(4 cm + the distance to the root that
-   J^e's torso implies) per axis, root rotation within ±0.15 rad, angles within ±0.25 rad;
+   J^e's torso implies) per axis, root rotation within ±0.15 rad, each limb's angles
+   within ±(0.25 rad + the angle its detected joints moved, seen from the limb's pivot,
+   up to 1.2 rad);
    the last 5 solutions and the J^e torso pose are injected as particles. Without one (the
    first frame, or after the track was lost: state *init*), the torso pose of J^e
    (:func:`swarmpose.init_pose.torso_pose`) with the body's rest angles starts a
@@ -65,6 +67,16 @@ LIMB_GROUPS: tuple[tuple[str, ...], ...] = (
     ("left_hip", "left_knee", "left_ankle"), ("right_hip", "right_knee", "right_ankle"), ("spine", "neck"),
 )
 """Tracking joints whose angles one perturbation redraws together."""
+
+LIMB_ENDS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("left_shoulder", ("left_elbow", "left_wrist")), ("right_shoulder", ("right_elbow", "right_wrist")),
+    ("left_hip", ("left_knee", "left_ankle")), ("right_hip", ("right_knee", "right_ankle")),
+    ("mid_hip", ("left_shoulder", "right_shoulder", "nose")),
+)
+"""Per limb group: the pivot and the points whose detected motion widens that limb's search."""
+
+ANGLE_RADIUS = (0.25, 1.2)
+"""Per-frame search half-width of a limb's angles (rad): the base, and the most it widens to."""
 
 HISTORY = 5
 
@@ -211,9 +223,10 @@ class Tracker:
         return x
 
     def _spread(self, centre: np.ndarray, count: int, rng: np.random.Generator, t_radius: np.ndarray,
-                rot_radius: float, angle_radius: float) -> np.ndarray:
+                rot_radius: float, angle_radius) -> np.ndarray:
         """``count`` poses uniformly around ``centre`` (36,): translation ±t_radius (3,) m, root
-        rotation ±rot_radius rad per axis, angles ±angle_radius rad (clipped to the limits)."""
+        rotation ±rot_radius rad per axis, angles ±angle_radius rad (scalar or (29,); clipped
+        to the limits)."""
         x = np.repeat(centre[None], count, axis=0)
         x[:, :3] += rng.uniform(-1.0, 1.0, (count, 3)) * t_radius
         turn = Rotation.from_rotvec(rng.uniform(-rot_radius, rot_radius, (count, 3))).as_matrix()
@@ -224,6 +237,28 @@ class Tracker:
         x[:, 7:] += rng.uniform(-angle_radius, angle_radius, (count, 29))
         x[:, 7:] = np.clip(x[:, 7:], ANGLE_LIMITS[:, 0], ANGLE_LIMITS[:, 1])
         return x
+
+    def _angle_radius(self, centre: np.ndarray, targets: JointTargets) -> np.ndarray:
+        """(29,) per-angle search half-width: each limb's widens with how far its detected
+        joints moved from the previous solution's, as an angle seen from the limb's pivot
+        (so the region holds the pose J^e implies)."""
+        radius = np.full(29, ANGLE_RADIUS[0])
+        if targets.count == 0:
+            return radius
+        names = tuple(dict.fromkeys([p for pivot, ends in LIMB_ENDS for p in (pivot, *ends)]))
+        pts = dict(zip(names, self.body.posed_points(centre[None], names)[0]))
+        detected = dict(zip(targets.names, targets.xy))
+        for (pivot, ends), cols in zip(LIMB_ENDS, self._limb_columns):
+            moved = []
+            for end in ends:
+                if end not in detected:
+                    continue
+                shift = np.linalg.norm(self.intrinsics.project(pts[end][None])[0] - detected[end])
+                reach = np.linalg.norm(pts[end] - pts[pivot]) * self.intrinsics.fx / max(pts[end][2], 0.1)
+                moved.append(shift / max(reach, 1.0))
+            if moved:
+                radius[cols - 7] = np.clip(ANGLE_RADIUS[0] + max(moved), *ANGLE_RADIUS)
+        return radius
 
     def _box(self, reference: np.ndarray | None, targets: JointTargets) -> tuple[float, float, float, float]:
         pts = []
@@ -283,7 +318,7 @@ class Tracker:
             centre = self.previous
             torso = torso_pose(self.body, lifted, centre[7:])
             offset = np.abs(torso[:3] - centre[:3]) if torso is not None else np.zeros(3)
-            start = self._spread(centre, pso.particles, rng, 0.04 + offset, 0.15, 0.25)
+            start = self._spread(centre, pso.particles, rng, 0.04 + offset, 0.15, self._angle_radius(centre, targets))
             seeds = [centre] + self.history[-HISTORY:][::-1] + ([torso] if torso is not None else [])
         for i, s in enumerate(seeds[:pso.particles]):
             start[i] = s
