@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Install the system libraries swarmpose needs on Debian/Ubuntu, when they are missing.
 # Open3D's wheel links libusb-1.0, libGL and libgomp; a fresh Debian may also lack python3-venv.
+# openni2: sources need OpenNI2: libopenni2-0 (libOpenNI2.so.0 and its drivers) and libopenni2-dev
+# (libOpenNI2.so, the name the `openni` Python bindings load).
 # As root this runs apt-get; otherwise it names the packages to install and fails.
 set -euo pipefail
 
@@ -9,13 +11,15 @@ declare -A lib_package=(
   [libusb-1.0.so.0]=libusb-1.0-0
   [libGL.so.1]=libgl1
   [libgomp.so.1]=libgomp1
+  [libOpenNI2.so.0]=libopenni2-0
+  [libOpenNI2.so]=libopenni2-dev
 )
 # ldconfig lives in /sbin on Debian, off a normal user's PATH; read its cache once.
 ldconfig_bin=$(command -v ldconfig || echo /sbin/ldconfig)
 cache=$("$ldconfig_bin" -p 2>/dev/null || true)
 missing=()
 for lib in "${!lib_package[@]}"; do
-  if [[ $cache != *"$lib"* ]]; then
+  if [[ $cache != *"$lib ("* ]]; then  # ldconfig -p lines read "<name> (libc6,...) => <path>"
     missing+=("${lib_package[$lib]}")
   fi
 done

@@ -69,7 +69,7 @@ def _print_summary(summary: dict, body) -> None:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    """The main job on embedded defaults: for now, synthesise a short sequence and report it."""
+    """The main job on embedded defaults: synthesise a short sequence, track it, report Δ and A(t)."""
     from .builtin_motions import builtin_motion
     from .model.loader import load_body
     from .synth import SynthConfig, synthesize
@@ -81,11 +81,16 @@ def cmd_demo(args: argparse.Namespace) -> int:
     summary = synthesize(body, motion, out, config, description={"motion_spec": "builtin:wave"},
                          progress=not args.quiet)
     _print_summary(summary, body)
-    first = json.loads((out / "groundtruth.jsonl").read_text().splitlines()[0])
-    wrist = first["joints3d"]["right_wrist"]
-    print(f"  frame 0: right wrist at ({wrist[0]:+.3f}, {wrist[1]:+.3f}, {wrist[2]:.3f}) m in the camera frame")
-    print("  (tracking and publishing come with the tracker and service issues)")
-    return 0
+    poses = out.parent / "poses.jsonl"
+    print(f"tracking it (hybrid objective, simulated 2D joints, {args.particles} particles x "
+          f"{args.generations} generations per frame) ...")
+    track_args = ["eval", str(out), "--body", "builtin", "--out", str(poses), "--particles", str(args.particles),
+                  "--generations", str(args.generations)] + (["--quiet"] if args.quiet else [])
+    parsed = build_parser().parse_args(track_args)
+    status = parsed.func(parsed)
+    print(f"  poses (one JSON line per frame): {poses}")
+    print("  (publishing over zenoh comes with the service issue)")
+    return status
 
 
 def cmd_body(args: argparse.Namespace) -> int:
@@ -133,6 +138,13 @@ def cmd_bench_detect(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_probe(args: argparse.Namespace) -> int:
+    """Read a few frames of a source and describe them (resolution, intrinsics, depth, rate, joints)."""
+    from .probe import run_probe
+
+    return run_probe(args.source, frames=args.frames, joints=args.joints, as_json=args.json)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every subcommand."""
     parser = argparse.ArgumentParser(prog="swarmpose", description="markerless 3D human pose tracking for RGBD cameras")
@@ -158,6 +170,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("demo", help="the main job on built-in defaults (needs no files)")
     p.add_argument("--out", default=str(DEMO_DIR / "sequence"), help="where the demo writes its sequence")
     p.add_argument("--frames", type=_positive_int, default=30)
+    p.add_argument("--particles", type=_positive_int, default=64, help="PSO particles per generation")
+    p.add_argument("--generations", type=_positive_int, default=64, help="PSO generations per frame")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_demo)
 
@@ -179,6 +193,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="shared assets folder (default: $SWARMPOSE_ASSETS or ../shared/assets)")
     p.add_argument("--json", action="store_true", help="one JSON object")
     p.set_defaults(func=cmd_bench_detect)
+
+    p = sub.add_parser("probe", help="read a few frames of a source: resolution, intrinsics, depth range, rate, joints")
+    p.add_argument("--source", required=True, help="folder:DIR, rgbd:C.png,D.png,K.json, mkv:FILE, bag:FILE, "
+                                                   "realsense:[SERIAL], azure:[INDEX], openni2:[FILE.oni|URI]")
+    p.add_argument("--joints", default=None, help="also detect 2D joints: simulated, onnx:MODEL, openpose-json:DIR")
+    p.add_argument("--frames", type=_positive_int, default=10, help="frames to read (default 10)")
+    p.add_argument("--json", action="store_true", help="one JSON object per frame, then a summary object")
+    p.set_defaults(func=cmd_probe)
 
     from .cli_track import add_track_commands
 

@@ -93,10 +93,13 @@ def test_makehuman_preset_exported_to_glb_reloads(tmp_path, capsys):
     assert info["vertices"] == 13380 and abs(info["height_m"] - 1.748) < 0.01
 
 
-def test_demo_writes_a_sequence(tmp_path, capsys):
-    assert main(["demo", "--out", str(tmp_path / "demo"), "--frames", "2", "--quiet"]) == 0
+def test_demo_writes_a_sequence_and_tracks_it(tmp_path, capsys):
+    args = ["demo", "--out", str(tmp_path / "demo"), "--frames", "3", "--particles", "12", "--generations", "8"]
+    assert main(args + ["--quiet"]) == 0
     out = capsys.readouterr().out
-    assert "wrote 2 frames" in out and (tmp_path / "demo" / "depth" / "000001.png").is_file()
+    assert "wrote 3 frames" in out and (tmp_path / "demo" / "depth" / "000002.png").is_file()
+    assert "Δ = " in out and "A(t):" in out
+    assert len((tmp_path / "poses.jsonl").read_text().splitlines()) == 3
 
 
 def test_bench_score_json_has_the_documented_keys(capsys):

@@ -20,7 +20,8 @@ every subclass.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,6 +31,8 @@ from ..errors import SourceError, SwarmposeError
 
 MAX_RECONNECTS = 3
 """How often a live source tries to reopen its device after a failed read before it gives up."""
+CAPTURE_RETRIES = 10
+"""Consecutive empty captures (no frame ready yet) of a live source that count as one failed read."""
 
 
 @dataclass(frozen=True)
@@ -117,3 +120,42 @@ def exc_message(exc: BaseException) -> str:
     text = _ANSI.sub("", str(exc)).strip() or type(exc).__name__
     text = re.sub(r"^\[Open3D \w+\] .*? \S+\.(?:cpp|h):\d+: ", "", text, flags=re.S)
     return " ".join(text.split())
+
+
+def live_frames(name: str, capture: Callable[[int], Frame | SkippedFrame | None], reopen: Callable[[], None],
+                 ) -> Iterator[Frame | SkippedFrame]:
+    """The capture loop of a live device with the failure policy of :mod:`.base`.
+
+    ``capture(index)`` returns a frame, None when none was ready, or raises; ``reopen()``
+    closes and reopens the device (raising when it cannot).
+    """
+    index, empty, failures = 0, 0, 0
+    while True:
+        try:
+            frame = capture(index)
+        except Exception as exc:  # a failed read of any kind counts towards the reconnects
+            frame, reason = None, exc_message(exc)
+        else:
+            reason = None
+            if frame is None:
+                empty += 1
+                if empty < CAPTURE_RETRIES:
+                    continue
+                reason = f"no frame in {CAPTURE_RETRIES} captures"
+        if frame is not None:
+            empty = failures = 0
+            yield frame
+            index += 1
+            continue
+        empty = 0
+        failures += 1
+        if failures > MAX_RECONNECTS:
+            raise SourceError(f"{name}: gave up after {MAX_RECONNECTS} reconnects ({reason})")
+        yield SkippedFrame(index, time.monotonic_ns(), f"{name}: {reason}; reconnecting ({failures}/{MAX_RECONNECTS})")
+        index += 1
+        try:
+            reopen()
+        except Exception as exc:
+            if failures >= MAX_RECONNECTS:
+                raise SourceError(f"{name}: cannot reopen the device ({exc_message(exc)})") from exc
+            time.sleep(1.0)
