@@ -81,14 +81,18 @@ def cmd_track(args: argparse.Namespace) -> int:
 
 
 def evaluate_run(run, ground_truth) -> dict:
-    """Δ, A(t) and coverage of a run against a sequence's ground truth."""
+    """Δ, A(t) and coverage of a run against a sequence's ground truth, over the frames the run
+    went through (a frame it skipped or could not estimate counts as a miss)."""
     from .evaluate import joint_errors, summarise
 
-    truth = ground_truth.joints3d
+    recorded = {r["frame"] for r in run.records}
+    rows = [i for i, f in enumerate(ground_truth.frames) if f in recorded]
+    truth = ground_truth.joints3d[rows]
     estimates = np.full_like(truth, np.nan)
-    for row, frame in enumerate(ground_truth.frames):
+    for k, row in enumerate(rows):
+        frame = ground_truth.frames[row]
         if frame in run.estimates:
-            estimates[row] = run.estimates[frame]
+            estimates[k] = run.estimates[frame]
     return summarise(joint_errors(estimates, truth))
 
 
@@ -101,10 +105,6 @@ def cmd_eval(args: argparse.Namespace) -> int:
     gt = getattr(source, "ground_truth", None)
     if gt is None:
         raise ConfigError(f"{args.seq} has no groundtruth.jsonl; eval needs a sequence from `swarmpose synth`")
-    if args.frames is not None:
-        keep = [i for i, f in enumerate(gt.frames) if f in {r["frame"] for r in run.records}]
-        gt = type(gt)(tuple(gt.frames[i] for i in keep), gt.poses[keep], gt.joints3d[keep],
-                      tuple(gt.detections[i] for i in keep))
     summary = evaluate_run(run, gt)
     result = {"mpjpe_mm": summary["mpjpe_mm"], "A": {str(t): a for t, a in summary["A"].items()},
               "fps": run.fps, "frames": run.frames, "mode": args.mode, "coverage": summary["coverage"],

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -33,13 +34,13 @@ class GroundTruth:
     joints3d: np.ndarray
     detections: tuple[tuple[str, np.ndarray] | None, ...]
 
+    @cached_property
+    def _rows(self) -> dict[int, int]:
+        return {f: i for i, f in enumerate(self.frames)}
+
     def row(self, frame: int) -> int:
         """Row of frame number ``frame``; KeyError if the sequence has no ground truth for it."""
-        try:
-            return self._rows[frame]
-        except AttributeError:
-            object.__setattr__(self, "_rows", {f: i for i, f in enumerate(self.frames)})
-            return self._rows[frame]
+        return self._rows[frame]
 
 
 def load_ground_truth(folder: Path) -> GroundTruth | None:

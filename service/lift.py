@@ -17,6 +17,7 @@ import numpy as np
 
 from .camera import Intrinsics
 from .joints2d.base import Joints2D
+from .model.skeleton import EVAL_JOINTS
 
 JOINT_RADIUS: dict[str, float] = {
     "head": 0.09, "nose": 0.0, "left_eye": 0.0, "right_eye": 0.0, "left_ear": 0.02, "right_ear": 0.02,
@@ -85,3 +86,24 @@ def lift_detection(depth: np.ndarray, intrinsics: Intrinsics, joints: Joints2D, 
     """J^e of a detection's body points with score >= ``min_score`` (see :func:`lift_keypoints`)."""
     points = {k: v for k, v in joints.by_point().items() if v[2] >= min_score}
     return lift_keypoints(depth, intrinsics, points)
+
+
+def lift_eval_joints(depth: np.ndarray, intrinsics: Intrinsics, joints: Joints2D | None, min_score: float
+                     ) -> np.ndarray:
+    """The ``lift`` baseline: J^e of the evaluation joints (14, 3) m (NaN where unknown).
+
+    ``head`` lifts the mean of the detected ears (else eyes, else the nose) with the head's
+    radius; ``neck`` is the detected neck, else the mean of the lifted shoulders.
+    """
+    if joints is None:
+        return np.full((len(EVAL_JOINTS), 3), np.nan)
+    pts = {k: v for k, v in joints.by_point().items() if v[2] >= min_score}
+    wanted = {k: v for k, v in pts.items() if k in EVAL_JOINTS}
+    for group in (("left_ear", "right_ear"), ("left_eye", "right_eye"), ("nose",)):
+        found = [pts[g] for g in group if g in pts]
+        if found and "head" not in wanted:
+            wanted["head"] = tuple(np.mean(found, axis=0))
+    lifted = lift_keypoints(depth, intrinsics, wanted)
+    if "neck" not in lifted and "left_shoulder" in lifted and "right_shoulder" in lifted:
+        lifted["neck"] = (lifted["left_shoulder"] + lifted["right_shoulder"]) / 2.0
+    return np.array([lifted.get(j, np.full(3, np.nan)) for j in EVAL_JOINTS])

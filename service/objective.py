@@ -71,6 +71,11 @@ class JointTargets:
     def count(self) -> int:
         return len(self.names)
 
+    @property
+    def extent_px(self) -> float:
+        """The person's size in pixels: the diagonal of the detected joints' box (0 with fewer than two)."""
+        return float(np.linalg.norm(np.ptp(self.xy, axis=0))) if self.count > 1 else 0.0
+
     @classmethod
     def empty(cls) -> JointTargets:
         return cls((), np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros((0, 3)), np.zeros(0))
@@ -152,7 +157,7 @@ class Objective:
             e_d = 100.0 * sums / self.normaliser
         if self.uses_joints:
             pts = self.model_points(transforms)
-            z = np.maximum(pts[..., 2:3], 1e-3)
+            z = np.maximum(pts[..., 2:3], 1e-3)  # a point behind the camera must not flip sides
             f = np.array([self.intrinsics.fx, self.intrinsics.fy])
             c = np.array([self.intrinsics.cx, self.intrinsics.cy])
             e_2d = weighted_joint_distance(pts[..., :2] / z * f + c, self.targets.xy, self.targets.weight)

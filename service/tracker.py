@@ -41,9 +41,10 @@ from scipy.spatial.transform import Rotation
 from .camera import Intrinsics
 from .errors import ConfigError, TrackingError
 from .gpu.tile import box_around
+from .init_pose import torso_pose
 from .joints2d.base import Joints2D
 from .kinematics import matrix_to_quaternion, quaternion_to_matrix
-from .lift import lift_keypoints
+from .lift import lift_eval_joints
 from .model.body import SkinnedBody
 from .model.skeleton import (
     ANGLE_JOINT,
@@ -157,27 +158,6 @@ def _nan_joints(n: int = len(EVAL_JOINTS), k: int = 3) -> np.ndarray:
     return np.full((n, k), np.nan)
 
 
-def lift_eval_joints(depth: np.ndarray, intrinsics: Intrinsics, joints: Joints2D | None, min_score: float
-                     ) -> np.ndarray:
-    """The ``lift`` baseline: J^e of the evaluation joints (14, 3) m (NaN where unknown).
-
-    ``head`` lifts the mean of the detected ears (else eyes, else the nose) with the head's
-    radius; ``neck`` is the detected neck, else the mean of the lifted shoulders.
-    """
-    if joints is None:
-        return _nan_joints()
-    pts = {k: v for k, v in joints.by_point().items() if v[2] >= min_score}
-    wanted = {k: v for k, v in pts.items() if k in EVAL_JOINTS}
-    for group in (("left_ear", "right_ear"), ("left_eye", "right_eye"), ("nose",)):
-        found = [pts[g] for g in group if g in pts]
-        if found and "head" not in wanted:
-            wanted["head"] = tuple(np.mean(found, axis=0))
-    lifted = lift_keypoints(depth, intrinsics, wanted)
-    if "neck" not in lifted and "left_shoulder" in lifted and "right_shoulder" in lifted:
-        lifted["neck"] = (lifted["left_shoulder"] + lifted["right_shoulder"]) / 2.0
-    return np.array([lifted.get(j, np.full(3, np.nan)) for j in EVAL_JOINTS])
-
-
 class Tracker:
     """Tracks one person in a stream of frames with a body model (see the module docstring)."""
 
@@ -200,7 +180,6 @@ class Tracker:
         self.lo[ANGLES], self.hi[ANGLES] = ANGLE_LIMITS[:, 0], ANGLE_LIMITS[:, 1]
         self._limb_columns = [7 + np.flatnonzero(np.isin(ANGLE_JOINT, [JOINT_INDEX[j] for j in group]))
                               for group in LIMB_GROUPS]
-        self._eval_index = self.body.point_indices(EVAL_JOINTS)
 
     # ------------------------------------------------------------------ helpers
     def reset(self) -> None:
@@ -295,8 +274,6 @@ class Tracker:
         targets = JointTargets.from_detection(joints, depth, self.intrinsics, self.body, self.config.min_score)
         has_depth = bool(np.any(depth > 0))
         lifted = {n: p for n, p in zip(targets.names, targets.xyz)}
-        from .init_pose import torso_pose
-
         state = "tracking" if self.previous is not None else "init"
         if self.previous is None:
             centre = torso_pose(self.body, lifted, self.body.rest_angles)
@@ -304,14 +281,13 @@ class Tracker:
                 why = "no person: fewer than 3 of the hips and shoulders detected with depth"
                 return self._empty(frame, why, t0)
         if not has_depth and targets.count == 0:
-            self.reset()
             return self._empty(frame, "no joints detected and no valid depth", t0)
 
         rng = np.random.default_rng([self.config.seed, frame.index])
         pso = self.config.pso
         timings: dict[str, float] = {}
         if state == "init":
-            centre = self._initialise(centre, targets, depth, rng, timings)
+            centre = self._initialise(centre, targets, rng, timings)
             seeds = [centre]
             start = self._spread(centre, pso.particles, rng, np.full(3, 0.04), 0.1, 0.15)
         else:
@@ -332,7 +308,8 @@ class Tracker:
         parts = {k: float(v[0]) for k, v in self._parts(best).items()}
         if self.config.smoothing > 0 and self.previous is not None and state == "tracking":
             best = self._smooth(best)
-        out_state, reason = self._judge(best, targets, parts, state)
+        tile, counts = self._render(best)
+        out_state, reason = self._judge(counts, targets, parts, state)
         if out_state == "lost":
             self.reset()
         else:
@@ -341,7 +318,7 @@ class Tracker:
             del self.history[:-HISTORY]
         joints3d = self.body.posed_points(best[None], EVAL_JOINTS)[0]
         joints2d = self.intrinsics.project(joints3d)
-        confidence = self._confidence(best, joints3d, joints2d, joints, targets)
+        confidence = self._confidence(tile, joints2d, joints, targets)
         timings["total"] = 1000 * (time.perf_counter() - t0)
         return TrackResult(frame.index, frame.timestamp_ns, out_state, reason, best, joints3d, joints2d, confidence,
                            parts, timings)
@@ -351,7 +328,7 @@ class Tracker:
         return TrackResult(frame.index, frame.timestamp_ns, "lost", reason, None, _nan_joints(), _nan_joints(k=2),
                            np.zeros(len(EVAL_JOINTS)), {}, {"total": 1000 * (time.perf_counter() - t0)})
 
-    def _initialise(self, centre: np.ndarray, targets: JointTargets, depth: np.ndarray, rng: np.random.Generator,
+    def _initialise(self, centre: np.ndarray, targets: JointTargets, rng: np.random.Generator,
                     timings: dict[str, float]) -> np.ndarray:
         """Joints-only PSO over wide angle ranges from the J^e torso pose; returns the centre for the frame."""
         if targets.count == 0:
@@ -377,14 +354,23 @@ class Tracker:
         out[ROOT_QUATERNION] /= np.linalg.norm(out[ROOT_QUATERNION])
         return out
 
-    def _judge(self, best: np.ndarray, targets: JointTargets, parts: dict[str, float], state: str) -> tuple[str, str]:
+    def _render(self, best: np.ndarray) -> tuple[np.ndarray | None, dict[str, np.ndarray] | None]:
+        """The best pose's depth tile (TH, TW) m and its counts, once per frame; (None, None)
+        when the frame's box holds no observed depth."""
+        observed = self.objective.scorer.observed
+        if observed is None or not np.any(observed > 0):
+            return None, None
+        tiles, _, counts = self.objective.scorer.render_and_score(best[None])
+        return tiles[0], counts
+
+    def _judge(self, counts: dict[str, np.ndarray] | None, targets: JointTargets, parts: dict[str, float],
+               state: str) -> tuple[str, str]:
         obj = self.objective
         if obj.uses_joints:
-            size = float(np.linalg.norm(np.ptp(targets.xy, axis=0))) if targets.count > 1 else 0.0
+            size = targets.extent_px
             if size > 0 and parts["E_J2D"] > self.config.lost_joint_error * size:
                 return "lost", f"2D joints off by {parts['E_J2D']:.0f} px (person {size:.0f} px)"
-        if obj.has_depth and obj.weights.depth > 0:
-            _, counts = obj.scorer.score(best[None])
+        if counts is not None and obj.weights.depth > 0:
             rendered = int(counts["rendered"][0])
             agree = int(counts["close"][0]) / rendered if rendered else 0.0
             if agree < self.config.lost_depth_agreement:
@@ -393,21 +379,18 @@ class Tracker:
             return "lost", "no joints and no depth to fit"
         return state, "" if obj.uses_joints else "no joints detected: depth only"
 
-    def _confidence(self, best: np.ndarray, joints3d: np.ndarray, joints2d: np.ndarray, joints: Joints2D | None,
+    def _confidence(self, tile: np.ndarray | None, joints2d: np.ndarray, joints: Joints2D | None,
                     targets: JointTargets) -> np.ndarray:
         scores = np.full((len(EVAL_JOINTS), 2), np.nan)
         detected = joints.by_point(self.config.min_score) if joints is not None else {}
-        size = float(np.linalg.norm(np.ptp(targets.xy, axis=0))) if targets.count > 1 else 0.0
-        sigma = max(0.04 * size, 4.0)
+        sigma = max(0.04 * targets.extent_px, 4.0)
         for i, name in enumerate(EVAL_JOINTS):
             if name in detected:
                 x, y, s = detected[name]
                 d = float(np.hypot(joints2d[i, 0] - x, joints2d[i, 1] - y))
                 scores[i, 0] = s * np.exp(-0.5 * (d / sigma) ** 2)
-        scorer = self.objective.scorer
-        tb, observed = scorer.tile_box, scorer.observed
-        if tb is not None and observed is not None and np.any(observed > 0):
-            tile = scorer.render(best[None])[0]
+        tb, observed = self.objective.scorer.tile_box, self.objective.scorer.observed
+        if tile is not None:
             tu = np.floor((joints2d[:, 0] - tb.u0 + 0.5) / tb.bw * tb.tw).astype(int)
             tv = np.floor((joints2d[:, 1] - tb.v0 + 0.5) / tb.bh * tb.th).astype(int)
             for i in range(len(EVAL_JOINTS)):

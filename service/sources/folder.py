@@ -231,10 +231,7 @@ class FolderSource(FrameSource):
             except SourceError as exc:
                 yield SkippedFrame(e.index, e.timestamp_ns, str(exc))
                 continue
-            mismatch = check_pair(depth, color, f"frame {e.index} ({e.depth.name})")
-            if mismatch is None and depth.shape != (self.intrinsics.height, self.intrinsics.width):
-                mismatch = (f"frame {e.index} ({e.depth.name}): images are {depth.shape[1]}x{depth.shape[0]}, "
-                            f"intrinsics {self.intrinsics.width}x{self.intrinsics.height}")
+            mismatch = check_pair(depth, color, f"frame {e.index} ({e.depth.name})", self.intrinsics)
             if mismatch is not None:
                 yield SkippedFrame(e.index, e.timestamp_ns, mismatch)
                 continue

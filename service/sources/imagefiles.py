@@ -26,16 +26,23 @@ def depth_to_metres(raw: np.ndarray, units_per_metre: float) -> np.ndarray:
     return (np.asarray(raw, dtype=np.float32) / np.float32(units_per_metre)).astype(np.float32)
 
 
-def read_depth(path: Path, units_per_metre: float = MILLIMETRES) -> np.ndarray:
-    """A uint16 depth PNG -> (H, W) float32 metres. SourceError for a missing, corrupt or non-16-bit file."""
+def _imread(path: Path, what: str) -> np.ndarray:
+    """The pixels of an image file as stored (OpenCV order); SourceError naming ``what`` and the
+    path when the file is missing or cannot be decoded."""
     import cv2
 
-    path = Path(path)
     if not path.is_file():
-        raise SourceError(f"depth image {path} is missing")
-    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if raw is None:
-        raise SourceError(f"depth image {path} cannot be decoded (corrupt or not an image)")
+        raise SourceError(f"{what} {path} is missing")
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise SourceError(f"{what} {path} cannot be decoded (corrupt or not an image)")
+    return img
+
+
+def read_depth(path: Path, units_per_metre: float = MILLIMETRES) -> np.ndarray:
+    """A uint16 depth PNG -> (H, W) float32 metres. SourceError for a missing, corrupt or non-16-bit file."""
+    path = Path(path)
+    raw = _imread(path, "depth image")
     if raw.ndim != 2 or raw.dtype != np.uint16:
         raise SourceError(f"depth image {path} is {raw.dtype} with shape {raw.shape}; "
                           "expected single-channel uint16 (depth units)")
@@ -47,11 +54,7 @@ def read_color(path: Path) -> np.ndarray:
     import cv2
 
     path = Path(path)
-    if not path.is_file():
-        raise SourceError(f"colour image {path} is missing")
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise SourceError(f"colour image {path} cannot be decoded (corrupt or not an image)")
+    img = _imread(path, "colour image")
     if img.dtype == np.uint16:
         img = (img >> 8).astype(np.uint8)
     if img.dtype != np.uint8:
@@ -111,9 +114,14 @@ def load_intrinsics(path: Path) -> tuple[Intrinsics, float | None]:
     return intr, units
 
 
-def check_pair(depth: np.ndarray, color: np.ndarray | None, what: str) -> str | None:
-    """None when depth (H, W) and colour (H, W, 3) have the same size, else the reason naming ``what``."""
-    if color is None or color.shape[:2] == depth.shape:
-        return None
-    return (f"{what}: depth {depth.shape[1]}x{depth.shape[0]} and colour {color.shape[1]}x{color.shape[0]} "
-            "differ in size (swarmpose needs depth registered to colour)")
+def check_pair(depth: np.ndarray, color: np.ndarray | None, what: str,
+               intrinsics: Intrinsics | None = None) -> str | None:
+    """None when depth (H, W) and colour (H, W, 3) have the same size (and, given ``intrinsics``,
+    the size the intrinsics describe), else the reason naming ``what``."""
+    if color is not None and color.shape[:2] != depth.shape:
+        return (f"{what}: depth {depth.shape[1]}x{depth.shape[0]} and colour {color.shape[1]}x{color.shape[0]} "
+                "differ in size (swarmpose needs depth registered to colour)")
+    if intrinsics is not None and depth.shape != (intrinsics.height, intrinsics.width):
+        return (f"{what}: images are {depth.shape[1]}x{depth.shape[0]}, intrinsics "
+                f"{intrinsics.width}x{intrinsics.height}; give the intrinsics of this camera mode")
+    return None

@@ -85,12 +85,9 @@ def rgbd_to_frame(rgbd, intrinsics: Intrinsics, depth_scale: float, index: int, 
             color = np.repeat(color, 3, axis=2)
         elif color.shape[2] == 4:
             color = np.ascontiguousarray(color[:, :, :3])
-    mismatch = check_pair(depth_m, color, f"frame {index}")
+    mismatch = check_pair(depth_m, color, f"frame {index}", intrinsics)
     if mismatch:
         raise SourceError(mismatch)
-    if depth_m.shape != (intrinsics.height, intrinsics.width):
-        raise SourceError(f"frame {index}: images are {depth_m.shape[1]}x{depth_m.shape[0]}, intrinsics "
-                          f"{intrinsics.width}x{intrinsics.height}")
     return Frame(index, int(timestamp_ns), depth_m, color, intrinsics)
 
 

@@ -26,12 +26,9 @@ class StillSource(FrameSource):
         intr, units = load_intrinsics(Path(intrinsics).expanduser())
         depth_m = read_depth(Path(depth).expanduser(), units or MILLIMETRES)
         rgb = read_color(Path(color).expanduser())
-        mismatch = check_pair(depth_m, rgb, f"{depth} / {color}")
+        mismatch = check_pair(depth_m, rgb, f"{depth} / {color} with {intrinsics}", intr)
         if mismatch:
             raise SourceError(mismatch)
-        if depth_m.shape != (intr.height, intr.width):
-            raise SourceError(f"{depth} is {depth_m.shape[1]}x{depth_m.shape[0]} but {intrinsics} describes "
-                              f"{intr.width}x{intr.height} images; give the intrinsics of this camera mode")
         self.intrinsics = intr
         self.frame = Frame(0, 0, depth_m, rgb, intr)
 
