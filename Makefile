@@ -13,11 +13,11 @@ demo: $(STAMP)
 	$(BIN)/swarmpose demo
 
 test: $(STAMP)
-	$(BIN)/ruff check service tests
+	$(BIN)/ruff check service tests examples
 	$(BIN)/python -m pytest -q
 
 lint: $(STAMP)
-	$(BIN)/ruff check service tests
+	$(BIN)/ruff check service tests examples
 
 setup: $(STAMP)
 

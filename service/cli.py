@@ -69,8 +69,10 @@ def _print_summary(summary: dict, body) -> None:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    """The main job on embedded defaults: synthesise a short sequence, track it, report Δ and A(t)."""
+    """The main job on embedded defaults: synthesise a short sequence, serve it over zenoh with a
+    subscriber beside it, report Δ, A(t), fps, latency and the replay outputs."""
     from .builtin_motions import builtin_motion
+    from .demo import run_demo
     from .model.loader import load_body
     from .synth import SynthConfig, synthesize
 
@@ -81,16 +83,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     summary = synthesize(body, motion, out, config, description={"motion_spec": "builtin:wave"},
                          progress=not args.quiet)
     _print_summary(summary, body)
-    poses = out.parent / "poses.jsonl"
-    print(f"tracking it (hybrid objective, simulated 2D joints, {args.particles} particles x "
+    print(f"tracking it with the service (hybrid objective, simulated 2D joints, {args.particles} particles x "
           f"{args.generations} generations per frame) ...")
-    track_args = ["eval", str(out), "--body", "builtin", "--out", str(poses), "--particles", str(args.particles),
-                  "--generations", str(args.generations)] + (["--quiet"] if args.quiet else [])
-    parsed = build_parser().parse_args(track_args)
-    status = parsed.func(parsed)
-    print(f"  poses (one JSON line per frame): {poses}")
-    print("  (publishing over zenoh comes with the service issue)")
-    return status
+    return run_demo(out, out.parent / "replay", args.particles, args.generations, args.quiet, args.frames)
 
 
 def cmd_body(args: argparse.Namespace) -> int:
@@ -205,6 +200,10 @@ def build_parser() -> argparse.ArgumentParser:
     from .cli_track import add_track_commands
 
     add_track_commands(sub, _add_body_options, _positive_int, _resolution)
+
+    from .cli_serve import add_service_commands
+
+    add_service_commands(sub)
 
     p = sub.add_parser("body", help="describe a body model; --export writes it as GLB")
     _add_body_options(p)

@@ -54,3 +54,11 @@ class DetectorError(SwarmposeError):
 
 class TrackingError(SwarmposeError):
     """The tracker was given inputs it cannot work with (e.g. an observation of the wrong size)."""
+
+
+class ProtocolError(SwarmposeError):
+    """A message does not follow the protocol (not JSON, or not matching its schema)."""
+
+
+class PublishError(SwarmposeError):
+    """zenoh could not be opened or configured (bad endpoint, port taken)."""

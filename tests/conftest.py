@@ -27,3 +27,20 @@ def surface_distance(vertices: np.ndarray, triangles: np.ndarray, points: np.nda
     scene.add_triangles(o3d.core.Tensor(np.asarray(vertices, dtype=np.float32)),
                         o3d.core.Tensor(np.asarray(triangles, dtype=np.uint32)))
     return scene.compute_distance(o3d.core.Tensor(np.asarray(points, dtype=np.float32))).numpy()
+
+
+@pytest.fixture(scope="session")
+def wave_sequence(tmp_path_factory) -> Path:
+    """A 6-frame synthetic sequence (built-in body waving, 30 fps) with ground truth."""
+    from swarmpose.cli import main
+
+    out = tmp_path_factory.mktemp("wave")
+    assert main(["synth", "--motion", "builtin:wave", "--frames", "6", "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 nobody listens on right now."""
+    from swarmpose.demo import free_local_port
+
+    return free_local_port()

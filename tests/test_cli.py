@@ -98,8 +98,13 @@ def test_demo_writes_a_sequence_and_tracks_it(tmp_path, capsys):
     assert main(args + ["--quiet"]) == 0
     out = capsys.readouterr().out
     assert "wrote 3 frames" in out and (tmp_path / "demo" / "depth" / "000002.png").is_file()
-    assert "Δ = " in out and "A(t):" in out
-    assert len((tmp_path / "poses.jsonl").read_text().splitlines()) == 3
+    assert "Δ = " in out and "A(t):" in out and "frames/s; latency median" in out
+    received = [line for line in out.splitlines() if line.startswith("  subscriber | demo frame")]
+    assert len(received) == 3 and "the subscriber received 3 frames (exit status 0)" in out
+    messages = [json.loads(line) for line in (tmp_path / "replay" / "poses.jsonl").read_text().splitlines()]
+    assert [m["frame"] for m in messages] == [0, 1, 2]
+    for name in ("poses.csv", "poses.bvh", "overlay.mp4"):
+        assert (tmp_path / "replay" / name).stat().st_size > 0
 
 
 def test_bench_score_json_has_the_documented_keys(capsys):

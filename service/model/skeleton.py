@@ -177,6 +177,15 @@ EVAL_JOINTS: tuple[str, ...] = (
 )
 """The joints Δ and A(t) are measured on (paper §3.2)."""
 
+EVAL_LINKS: tuple[tuple[str, str], ...] = (
+    ("head", "neck"), ("neck", "left_shoulder"), ("neck", "right_shoulder"),
+    ("left_shoulder", "left_elbow"), ("left_elbow", "left_wrist"),
+    ("right_shoulder", "right_elbow"), ("right_elbow", "right_wrist"),
+    ("left_shoulder", "left_hip"), ("right_shoulder", "right_hip"), ("left_hip", "right_hip"),
+    ("left_hip", "left_knee"), ("left_knee", "left_ankle"), ("right_hip", "right_knee"), ("right_knee", "right_ankle"),
+)
+"""Pairs of evaluation joints drawn as bones (overlays, viewers)."""
+
 POINT_NAMES: tuple[str, ...] = EVAL_JOINTS + (
     "nose", "left_eye", "right_eye", "left_ear", "right_ear", "mid_hip",
     "left_heel", "right_heel", "left_toe", "right_toe", "spine", "left_clavicle", "right_clavicle",

@@ -73,12 +73,14 @@ class FrameSource:
     """Base class of frame sources. Subclasses implement :meth:`_frames` and may override :meth:`close`.
 
     Attributes: ``uri`` (what the user passed to ``--source``), ``length`` (frames, None when
-    unknown or live), ``status`` (a short human-readable state: "open", "ended", "error: …").
+    unknown or live), ``status`` (a short human-readable state: "open", "ended", "error: …"),
+    ``live`` (a camera delivering frames in real time, not a recording).
     """
 
     uri: str = ""
     length: int | None = None
     status: str = "open"
+    live: bool = False
 
     def _frames(self) -> Iterator[Frame | SkippedFrame]:
         raise NotImplementedError

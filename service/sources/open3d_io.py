@@ -147,6 +147,8 @@ class _LiveSensorSource(FrameSource):
     """A live Open3D sensor: subclasses open it (``_open``), capture one frame (``_capture``,
     None when none came) and close it; reconnecting follows :func:`live_frames`."""
 
+    live = True
+
     def _open(self) -> None:
         raise NotImplementedError
 

@@ -228,7 +228,7 @@ class OpenNI2Source(FrameSource):
                 self._colors_left = (int(dev.playback.get_number_of_frames(self._color))
                                      if self._color is not None else 0)
             else:
-                self.length = None
+                self.length, self.live = None, True
                 if self._color is not None:
                     try:
                         dev.set_depth_color_sync_enabled(True)

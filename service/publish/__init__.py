@@ -1,0 +1,1 @@
+"""Where results go: zenoh (live), files (replay) and the overlay video."""

@@ -1,0 +1,177 @@
+"""zenoh sessions: configuration shared by the worker and the client, and the worker's publisher.
+
+:func:`zenoh_config` builds a ``zenoh.Config`` from the options every zenoh program shares
+(``--mode``, ``--connect``, ``--listen``, multicast scouting, a JSON5 file). :class:`ZenohSink`
+publishes a worker's messages (see ``protocol/README.md``):
+
+* ``swarmpose/<camera>/frame`` — every frame message, ``application/json``;
+* ``swarmpose/<camera>/status`` — every status message;
+* ``swarmpose/<camera>/alive`` — a liveliness token while the sink is open;
+* ``swarmpose/<camera>/info`` — a queryable answering with the current info message.
+
+A router that cannot be reached is not fatal: in client mode zenoh refuses to open, so the
+sink retries every ``retry_s`` seconds (frames meanwhile are counted as ``unsent``) and says
+so in :meth:`ZenohSink.state`; in peer mode the session opens and zenoh keeps trying the
+``connect`` endpoints itself. Malformed endpoints, a zenoh file that does not parse and a
+listen address that cannot be bound raise :class:`~swarmpose.errors.PublishError` at once.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections.abc import Callable, Sequence
+
+from ..errors import PublishError
+from ..messages import encode, keys
+from ..sources.base import Frame, exc_message
+
+UNREACHABLE = "Unable to connect"
+
+
+def zenoh_config(mode: str = "peer", connect: Sequence[str] = (), listen: Sequence[str] = (),
+                 multicast: bool = True, config_file: str = ""):
+    """A ``zenoh.Config``: ``config_file`` (JSON5) first, then mode, endpoints and scouting.
+
+    mode: peer or client; connect / listen: endpoints such as ``tcp/127.0.0.1:7447``;
+    multicast: multicast scouting (automatic discovery of peers and routers on the LAN).
+    Raises PublishError naming the bad value.
+    """
+    import zenoh
+
+    if mode not in ("peer", "client"):
+        raise PublishError(f"zenoh mode must be peer or client, got {mode!r}")
+    try:
+        config = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
+    except zenoh.ZError as exc:
+        raise PublishError(f"zenoh config file {config_file}: {_short(exc)}; pass a valid JSON5 zenoh "
+                           "configuration") from None
+    for key, value, what in (("mode", mode, "--mode"), ("connect/endpoints", list(connect), "--connect"),
+                             ("listen/endpoints", list(listen), "--listen"),
+                             ("scouting/multicast/enabled", bool(multicast), "multicast")):
+        if key.endswith("endpoints") and not value:
+            continue
+        try:
+            config.insert_json5(key, json.dumps(value))
+        except zenoh.ZError as exc:
+            raise PublishError(f"zenoh {what} {value!r}: {_short(exc)} (endpoints look like tcp/HOST:PORT)") from None
+    return config
+
+
+def _short(exc: BaseException) -> str:
+    """zenoh's message without its Rust source locations."""
+    text = exc_message(exc).replace("Json5Err(Message { msg: ", "")
+    return text.split(" at /")[0].strip().strip('"')
+
+
+def open_session(config, what: str = "zenoh"):
+    """``zenoh.open(config)``; PublishError with zenoh's reason (and whether it is worth a retry)."""
+    import zenoh
+
+    try:
+        return zenoh.open(config)
+    except zenoh.ZError as exc:
+        reason = _short(exc)
+        hint = ("start the zenoh router or fix --connect" if UNREACHABLE in reason
+                else "check --listen/--connect (is the port taken?)")
+        raise PublishError(f"{what}: cannot open a zenoh session: {reason}; {hint}") from None
+
+
+class ZenohSink:
+    """Publishes a worker's messages on zenoh for camera ``camera``.
+
+    info: a callable returning the current info message (called for every query).
+    """
+
+    def __init__(self, camera: str, info: Callable[[], dict], *, mode: str = "peer", connect: Sequence[str] = (),
+                 listen: Sequence[str] = (), multicast: bool = True, config_file: str = "", retry_s: float = 5.0):
+        self.camera, self.info, self.retry_s = camera, info, retry_s
+        self.mode, self.connect, self.listen = mode, tuple(connect), tuple(listen)
+        self.keys = keys(camera)
+        self._config_args = (mode, self.connect, self.listen, multicast, config_file)
+        zenoh_config(*self._config_args)  # a malformed endpoint or file fails here, before any frame
+        self._lock = threading.Lock()
+        self._session = None
+        self._publishers: dict = {}
+        self._handles: list = []
+        self.error = ""
+        self.unsent = 0
+        self._next_try = 0.0
+        self._closed = False
+        self._try_open(first=True)
+
+    # ------------------------------------------------------------------ session
+    def _try_open(self, first: bool = False) -> None:
+        import zenoh
+
+        if self._session is not None or self._closed or time.monotonic() < self._next_try:
+            return
+        try:
+            session = open_session(zenoh_config(*self._config_args), f"camera {self.camera}")
+        except PublishError as exc:
+            if first and UNREACHABLE not in str(exc):
+                raise
+            self.error = f"{exc} (retrying every {self.retry_s:g} s)"
+            self._next_try = time.monotonic() + self.retry_s
+            return
+        json_enc = zenoh.Encoding.APPLICATION_JSON
+        self._publishers = {kind: session.declare_publisher(self.keys[kind], encoding=json_enc)
+                            for kind in ("frame", "status")}
+        self._handles = [session.liveliness().declare_token(self.keys["alive"]),
+                         session.declare_queryable(self.keys["info"], self._answer)]
+        self._session, self.error = session, ""
+
+    def _answer(self, query) -> None:
+        import zenoh
+
+        try:
+            query.reply(self.keys["info"], encode(self.info()), encoding=zenoh.Encoding.APPLICATION_JSON)
+        except Exception as exc:  # a failing reply must not take the zenoh callback thread down
+            self.error = f"info query failed: {exc_message(exc)}"
+
+    def _put(self, kind: str, message: dict) -> None:
+        with self._lock:
+            self._try_open()
+            if self._session is None:
+                self.unsent += 1
+                return
+            self._publishers[kind].put(encode(message))
+
+    # ------------------------------------------------------------------ Sink
+    def frame(self, message: dict, frame: Frame | None) -> None:
+        """Publish a frame message on ``swarmpose/<camera>/frame``."""
+        self._put("frame", message)
+
+    def status(self, message: dict) -> None:
+        """Publish a status message on ``swarmpose/<camera>/status``."""
+        self._put("status", message)
+
+    def state(self) -> dict:
+        """The ``zenoh`` part of a status message: mode, endpoints, connected peers/routers, warning."""
+        peers = routers = 0
+        session = self._session
+        if session is not None:
+            try:
+                peers, routers = len(list(session.info.peers_zid())), len(list(session.info.routers_zid()))
+            except Exception:  # the session may be closing
+                pass
+        warning = self.error
+        if not warning and self.connect and peers + routers == 0:
+            warning = f"no --connect endpoint reachable yet ({', '.join(self.connect)}); zenoh keeps trying"
+        return {"mode": self.mode, "connect": list(self.connect), "listen": list(self.listen), "peers": peers,
+                "routers": routers, "warning": warning}
+
+    def close(self) -> None:
+        """Withdraw the liveliness token and close the session (idempotent)."""
+        with self._lock:
+            self._closed = True
+            session, self._session = self._session, None
+            for handle in self._handles + list(self._publishers.values()):
+                try:
+                    handle.undeclare()
+                except Exception:  # already gone with the session
+                    pass
+            self._handles, self._publishers = [], {}
+            if session is not None:
+                session.close()
