@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Install the system libraries swarmpose needs on Debian/Ubuntu, when they are missing.
-# Open3D's wheel links libusb-1.0, libGL and libgomp; a fresh Debian may also lack python3-venv.
+# Open3D's wheel links libusb-1.0, libGL, libEGL and libgomp; a fresh Debian may also lack python3-venv.
 # openni2: sources need OpenNI2: libopenni2-0 (libOpenNI2.so.0 and its drivers) and libopenni2-dev
 # (libOpenNI2.so, the name the `openni` Python bindings load).
 # As root this runs apt-get; otherwise it names the packages to install and fails.
@@ -10,6 +10,7 @@ python=${PYTHON:-python3}
 declare -A lib_package=(
   [libusb-1.0.so.0]=libusb-1.0-0
   [libGL.so.1]=libgl1
+  [libEGL.so.1]=libegl1
   [libgomp.so.1]=libgomp1
   [libOpenNI2.so.0]=libopenni2-0
   [libOpenNI2.so]=libopenni2-dev
