@@ -11,9 +11,10 @@ Three threads hand frames over through one-slot queues (:class:`Handover`):
   it wait; every frame is processed, as fast as the slowest stage goes.
 
 Latency of a frame = wall-clock time from the moment acquisition took it from the source
-(``received_ns``) to the moment its message is made (``publish_ns``). In replay the reader
-runs ahead of the tracker, so there ``received_ns`` is when detection takes the frame:
-the latency is then the processing time, not the time the frame sat in the read-ahead. Every
+(``received_ns``) to the moment its message is made (``publish_ns``). In replay every
+stage runs ahead of the next and frames queue, so there the waits are left out:
+``received_ns`` is shifted to count from when detection took the frame, minus the time it
+then waited for the tracker; the latency is the processing time (detection + tracking). Every
 ``status_period_s`` the worker sends a ``swarmpose.status`` message (fps and latency over
 the period, frame counters, source / detector / tracker / zenoh state, recent errors) to
 its sinks and to ``log``.
@@ -109,6 +110,7 @@ class Received:
     received_ns: int
     joints: object = None
     note: str = ""
+    detected_ns: int = 0
 
 
 @dataclass
@@ -308,6 +310,7 @@ class Worker:
                         self.stats.detector_errors += 1
                         self.stats.detector_error = got.note
                         self.report(got.note)
+                got.detected_ns = time.time_ns()
                 if not self._detected.put(got):
                     self.stats.dropped += 1
         finally:
@@ -319,6 +322,8 @@ class Worker:
                 got = self._detected.get()
                 if got is END:
                     return
+                if not self.drop_stale:  # replay: leave out the wait for the previous frame's tracking
+                    got.received_ns += time.time_ns() - got.detected_ns
                 self._publish(got, *self._track_one(got))
         finally:
             self._done.set()

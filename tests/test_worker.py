@@ -102,6 +102,15 @@ def test_replay_publishes_every_frame_in_order_with_valid_messages(wave_sequence
     assert last["state"] == "source-ended" and last["frames"]["published"] == 6 and sink.closed == 1
 
 
+def test_replay_latency_is_the_processing_time_not_the_queue(wave_sequence, body):
+    """Frames queue behind each other in replay; the latency leaves that out (tracking time + detection)."""
+    sink = Collect()
+    make_worker(wave_sequence, body, [sink], SMALL).run()
+    for m in sink.frames[1:]:
+        tracking = m["timings_ms"]["total"]
+        assert tracking <= m["latency_ms"] < 1.5 * tracking + 100, (m["frame"], tracking, m["latency_ms"])
+
+
 def test_live_keeps_the_newest_frame_and_counts_the_dropped(wave_sequence, body):
     sink = Collect()
     stats = make_worker(wave_sequence, body, [sink], SMALL, drop_stale=True, pace_fps=200.0).run()
