@@ -14,13 +14,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from swarmpose.client import Client, add_zenoh_options, format_frame
-
-
-def say(line: str) -> None:
-    """One whole line at once: status callbacks print from zenoh's thread."""
-    sys.stdout.write(line + "\n")
-    sys.stdout.flush()
+from swarmpose.client import Client, add_zenoh_options, format_frame, say
 
 
 def main() -> int:

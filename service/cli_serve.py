@@ -19,6 +19,7 @@ from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from . import messages
 from .config import FIELDS, ServiceConfig, load_config
 from .errors import ConfigError
 from .progress import Progress
@@ -126,6 +127,8 @@ def build_service(config: ServiceConfig, stack: ExitStack, *, replay: bool, out:
     folder = out or config.record
     if folder:
         recording = open_recording(Path(folder), tracking_body, fps=fps, overlay=config.overlay)
+        for sink in recording:  # the worker closes them; this covers a failure before it runs
+            stack.callback(sink.close)
         sinks.extend(recording)
         service.outputs = [Path(s.path) for s in recording]
     ground_truth = getattr(source, "ground_truth", None)
@@ -179,9 +182,11 @@ class ThrottledLog:
             print(line, file=sys.stderr, flush=True)
 
 
-def _stop_on_signals(worker) -> None:
+def _stop_on_signals(worker, stack: ExitStack) -> None:
+    """SIGINT and SIGTERM stop ``worker``; ``stack`` puts the previous handlers back."""
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: worker.stop())
+        previous = signal.signal(sig, lambda *_: worker.stop())
+        stack.callback(signal.signal, sig, previous)
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
@@ -189,14 +194,13 @@ def cmd_serve(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     with ExitStack() as stack:
         service = build_service(config, stack, replay=False, log=ThrottledLog())
-        _stop_on_signals(service.worker)
-        keys = f"swarmpose/{config.camera_id}/{{frame,status,alive,info}}"
+        _stop_on_signals(service.worker, stack)
+        keys = ", ".join(messages.keys(config.camera_id).values())
         where = f"zenoh {config.zenoh_mode}" + (f", connect {', '.join(config.connect)}" if config.connect else "") + (
             f", listen {', '.join(config.listen)}" if config.listen else "")
         print(f"swarmpose serve: {service.worker.source_uri} -> {keys} ({where}); Ctrl-C stops", file=sys.stderr)
         service.worker.run()
-    state = service.worker.state
-    return 1 if state == "source-failed" else 0
+    return 1 if service.worker.state in ("source-failed", "failed") else 0
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
@@ -204,7 +208,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     config = config_from_args(args, defaults={"zenoh_mode": "off"})
     with ExitStack() as stack:
         service = build_service(config, stack, replay=True, out=args.out, progress=not args.quiet)
-        _stop_on_signals(service.worker)
+        _stop_on_signals(service.worker, stack)
         started = time.monotonic()
         stats = service.worker.run()
     seconds = time.monotonic() - started
@@ -213,18 +217,17 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(json.dumps(result))
     else:
         print(format_replay_summary(result))
-    return 1 if service.worker.state == "source-failed" else 0
+    return 1 if service.worker.state in ("source-failed", "failed") else 0
 
 
 def replay_summary(service: Service, stats, seconds: float) -> dict:
     """What a replay produced: counts, fps, latency, Δ / A(t) (with ground truth), output files and sizes."""
-    import numpy as np
+    from .worker import latency_summary
 
-    lat = np.array(stats.all_latencies)
     result = {"frames": stats.published, "skipped": stats.skipped, "failed": stats.failed,
               "fps": round(stats.published / seconds, 3) if seconds > 0 else 0.0,
-              "latency_ms": {"median": round(float(np.median(lat)), 1) if lat.size else None,
-                             "p95": round(float(np.percentile(lat, 95)), 1) if lat.size else None},
+              "latency_ms": {k: None if v is None else round(v, 1)
+                             for k, v in latency_summary(stats.all_latencies).items()},
               "outputs": {str(p): p.stat().st_size for p in service.outputs if p.exists()},
               "opencl_device": service.worker.opencl_device, "state": service.worker.state}
     if service.score is not None and service.score.estimates:
@@ -250,9 +253,14 @@ def format_replay_summary(result: dict) -> str:
 
 def cmd_health(args: argparse.Namespace) -> int:
     """Exit 0 when the worker's status file is fresh and it is running, 1 otherwise (docker HEALTHCHECK)."""
-    path = args.file or load_config({}).health_file
+    try:
+        path = args.file or load_config({}).health_file
+    except ConfigError as exc:  # exit 1, not 2: docker reserves 2 in health checks
+        print(f"unhealthy: {exc}")
+        return 1
     if not path:
-        raise ConfigError("no status file: pass --file or set SWARMPOSE_HEALTH_FILE (the worker writes it)")
+        print("unhealthy: no status file: pass --file or set SWARMPOSE_HEALTH_FILE (the worker writes it)")
+        return 1
     try:
         status = json.loads(Path(path).read_text(encoding="utf-8"))
         age = (time.time_ns() - int(status["time_ns"])) / 1e9

@@ -24,7 +24,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 
-from .errors import ProtocolError, PublishError, SwarmposeError
+from .errors import ProtocolError, SwarmposeError
 from .messages import check_camera_id, decode, keys, validate
 from .publish.zenoh_link import open_session, zenoh_config
 
@@ -174,7 +174,7 @@ def format_frame(message: dict, joints: Sequence[str] = ("head", "left_wrist", "
     return "  ".join(parts)
 
 
-def _say(line: str) -> None:
+def say(line: str) -> None:
     """Print one whole line at once (zenoh's callback thread prints too)."""
     sys.stdout.write(line + "\n")
     sys.stdout.flush()
@@ -206,20 +206,20 @@ def main(argv: list[str] | None = None) -> int:
     try:
         client = Client(args.camera, mode=args.mode, connect=args.connect, listen=args.listen,
                         multicast=not args.no_multicast, config_file=args.zenoh_config)
-    except (SwarmposeError, PublishError) as exc:
+    except SwarmposeError as exc:
         print(f"swarmpose subscribe: error: {exc}", file=sys.stderr)
         return 2
     if args.status:
         from .worker import format_status
 
-        client.on_status(lambda m: _say(format_status(m)))
-    _say(f"listening on {client.keys['frame']} ...")
+        client.on_status(lambda m: say(format_status(m)))
+    say(f"listening on {client.keys['frame']} ...")
     received = 0
     try:
         with client:
             for message in client.frames(timeout=args.timeout or None, count=args.count or None):
                 received += 1
-                _say(format_frame(message))
+                say(format_frame(message))
     except KeyboardInterrupt:
         pass
     if client.rejected:

@@ -12,7 +12,7 @@ came from (file, variable or flag) and what is allowed.
 
 from __future__ import annotations
 
-import dataclasses
+import math
 import os
 import sys
 from collections.abc import Mapping
@@ -89,10 +89,10 @@ class ServiceConfig:
             if getattr(self, name) < 1:
                 raise ConfigError(f"{name} must be at least 1, got {getattr(self, name)}")
         for name in ("rate", "reopen_s", "max_frames"):
-            if getattr(self, name) < 0:
-                raise ConfigError(f"{name} must be 0 or more, got {getattr(self, name)}")
-        if not self.status_period_s > 0:
-            raise ConfigError(f"status_period_s must be positive, got {self.status_period_s}")
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
+                raise ConfigError(f"{name} must be a finite number, 0 or more, got {getattr(self, name)}")
+        if not (math.isfinite(self.status_period_s) and self.status_period_s > 0):
+            raise ConfigError(f"status_period_s must be a finite positive number, got {self.status_period_s}")
         _ = self.tile_size  # raises ConfigError for a malformed tile
 
     @property
@@ -202,22 +202,28 @@ def load_config(flags: Mapping[str, object] | None = None, config_file: str | No
     ``$SWARMPOSE_CONFIG``) < environment < ``flags`` (field name -> value; None = not given)."""
     env = os.environ if env is None else env
     settings: dict = dict(defaults or {})
+    origins: dict[str, str] = {}
     path = config_file or env.get(ENV_CONFIG)
     if path:
-        settings.update(read_toml(path))
-    settings.update(from_environment(env))
+        from_file = read_toml(path)
+        settings.update(from_file)
+        origins.update({name: f"config file {path}" for name in from_file})
+    from_env = from_environment(env)
+    settings.update(from_env)
+    origins.update({name: f"environment variable {ENV_PREFIX}{name.upper()}" for name in from_env})
     for name, value in (flags or {}).items():
         if value is None:
             continue
         if name not in FIELDS:
             raise ConfigError(f"unknown setting {name!r}")
         settings[name] = convert(name, value, f"flag --{name.replace('_', '-')}")
-    return ServiceConfig(**settings)
+        origins[name] = f"flag --{name.replace('_', '-')}"
+    try:
+        return ServiceConfig(**settings)
+    except ConfigError as exc:
+        text = str(exc)
+        culprit = next((n for n in origins if text.startswith(n) or text.startswith(n.replace("_", " "))), None)
+        raise ConfigError(f"{origins[culprit]}: {text}" if culprit else text) from None
 
 
-def as_dict(config: ServiceConfig) -> dict:
-    """The configuration as plain JSON-ready values."""
-    return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(config).items()}
-
-
-__all__ = ["ServiceConfig", "load_config", "read_toml", "from_environment", "as_dict"]
+__all__ = ["ServiceConfig", "load_config", "read_toml", "from_environment"]

@@ -23,7 +23,7 @@ import numpy as np
 from . import __version__
 from .errors import ConfigError, ProtocolError
 from .model.skeleton import ANGLE_LIMITS, ANGLE_NAMES, EVAL_JOINTS, EVAL_LINKS
-from .tracker import TrackResult
+from .tracker import TrackResult, json_vector
 
 PROTOCOL_VERSION = 1
 SCHEMAS = ("frame", "status", "info")
@@ -92,13 +92,9 @@ def encode(message: dict) -> bytes:
     return json.dumps(message, allow_nan=False, separators=(",", ":")).encode("utf-8")
 
 
-def _vec(v: np.ndarray, digits: int) -> list[float] | None:
-    return [round(float(x), digits) for x in v] if np.all(np.isfinite(v)) else None
-
-
 def body_entry(result: TrackResult, body_id: int = 0) -> dict:
     """One body of a frame message from the tracker's answer."""
-    joints = {name: {"position_m": _vec(p3, 6), "pixel": _vec(p2, 2),
+    joints = {name: {"position_m": json_vector(p3, 6), "pixel": json_vector(p2, 2),
                      "confidence": round(float(np.clip(c, 0.0, 1.0)), 3)}
               for name, p3, p2, c in zip(EVAL_JOINTS, result.joints3d, result.joints2d, result.confidence)}
     return {"id": body_id, "state": result.state, "reason": result.reason,

@@ -140,9 +140,7 @@ class TrackResult:
 
     def as_dict(self) -> dict:
         """JSON-ready: joints by name, numbers rounded to µm / 0.01 px."""
-        def vec(v, nd):
-            return None if not np.all(np.isfinite(v)) else [round(float(x), nd) for x in v]
-
+        vec = json_vector
         return {
             "frame": self.index, "timestamp_ns": self.timestamp_ns, "state": self.state, "reason": self.reason,
             "pose": None if self.pose is None else [round(float(x), 6) for x in self.pose],
@@ -152,6 +150,11 @@ class TrackResult:
             "objective": {k: round(float(v), 4) for k, v in self.objective.items()},
             "timings_ms": {k: round(float(v), 2) for k, v in self.timings_ms.items()},
         }
+
+
+def json_vector(v: np.ndarray, digits: int) -> list[float] | None:
+    """A vector as a JSON list rounded to ``digits`` decimals, or None when any entry is not finite."""
+    return [round(float(x), digits) for x in v] if np.all(np.isfinite(v)) else None
 
 
 def _nan_joints(n: int = len(EVAL_JOINTS), k: int = 3) -> np.ndarray:

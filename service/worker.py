@@ -47,6 +47,7 @@ END = object()
 """Put through the hand-overs after the last frame."""
 MAX_ERRORS = 20
 JOIN_TIMEOUT_S = 30.0
+ACQUIRE_JOIN_S = 2.0
 
 
 class Handover:
@@ -134,7 +135,7 @@ class WorkerStats:
 
 
 class Worker:
-    """Runs the pipeline until the source ends, ``max_frames`` are published or :meth:`stop`.
+    """Runs the pipeline until the source ends, ``max_frames`` are received or :meth:`stop`.
 
     open_source: opens the frame source (called again to reopen or loop); detector: a
     :class:`~swarmpose.joints2d.base.Detector`; make_tracker: builds a
@@ -176,20 +177,21 @@ class Worker:
         self._started = time.monotonic()
         self._period_start = time.monotonic()
         self._period_published = 0
-        self._tracking_s = 0.0
 
     # ------------------------------------------------------------------ control
     def stop(self) -> None:
         """Ask every thread to finish (from a signal handler or another thread)."""
-        self._stop.set()
-        self.state = "stopping"
+        with self._lock:
+            self._stop.set()
+            self.state = "stopping"
         self._acquired.abort()
         self._detected.abort()
 
     def _set_state(self, state: str) -> None:
         """Change the worker state, unless it is already stopping (a stop is final)."""
-        if not self._stop.is_set():
-            self.state = state
+        with self._lock:
+            if not self._stop.is_set():
+                self.state = state
 
     def report(self, message: str) -> None:
         """Keep an error message for the next status (newest last)."""
@@ -200,7 +202,7 @@ class Worker:
         """Run until done; sends a status every period and a last one at the end. Closes the sinks."""
         threads = [threading.Thread(target=self._guard, args=(fn,), name=f"swarmpose {name}", daemon=True)
                    for name, fn in (("acquire", self._acquire), ("detect", self._detect), ("track", self._track))]
-        self.state = "running"
+        self._set_state("running")
         for t in threads:
             t.start()
         try:
@@ -209,17 +211,22 @@ class Worker:
         except KeyboardInterrupt:
             self.stop()
         finally:
-            if not self._done.is_set():
-                self.stop()
-            for t in threads:
-                t.join(JOIN_TIMEOUT_S)
-            self._set_state("source-failed" if self.source_state.startswith("error") else "source-ended")
-            self._send_status()
-            for sink in self.sinks:
-                try:
-                    sink.close()
-                except Exception as exc:  # report, close the others
-                    self.report(f"closing {type(sink).__name__}: {exc_message(exc)}")
+            try:
+                if not self._done.is_set():
+                    self.stop()
+                # tracking and detection first (they finish their frame); acquisition may be blocked
+                # inside a camera read that cannot be interrupted, so it gets a short wait only
+                for t in reversed(threads):
+                    t.join(JOIN_TIMEOUT_S if t is not threads[0] else ACQUIRE_JOIN_S)
+                if self.state != "failed":
+                    self._set_state("source-failed" if self.source_state.startswith("error") else "source-ended")
+                self._send_status()
+            finally:
+                for sink in self.sinks:
+                    try:
+                        sink.close()
+                    except Exception as exc:  # report, close the others
+                        self.report(f"closing {type(sink).__name__}: {exc_message(exc)}")
         return self.stats
 
     def _guard(self, fn: Callable[[], None]) -> None:
@@ -229,6 +236,7 @@ class Worker:
         except Exception as exc:  # a bug must not leave the other threads waiting forever
             self.report(f"{threading.current_thread().name} crashed: {type(exc).__name__}: {exc_message(exc)}")
             self.stop()
+            self.state = "failed"
             self._done.set()
 
     # ------------------------------------------------------------------ threads
@@ -266,7 +274,7 @@ class Worker:
         while not self._stop.wait(delay):
             try:
                 source = self.open_source()
-            except SwarmposeError as exc:
+            except Exception as exc:  # any driver error: report it and try again later
                 self.source_state = f"error: {exc}"
                 self.report(f"reopening {self.source_uri}: {exc}")
                 delay = self.reopen_s
@@ -275,14 +283,20 @@ class Worker:
             return source
         return None
 
+    def _count_drop(self) -> None:
+        with self._lock:
+            self.stats.dropped += 1
+
     def _enough(self) -> bool:
         return bool(self.max_frames) and self.stats.received >= self.max_frames
 
     def _read_all(self, source: FrameSource) -> None:
         start_wall, start_capture = None, None
         pace = self.pace_fps and not source.live
+        if self._enough():
+            return
         for item in source:
-            if self._stop.is_set() or self._enough():
+            if self._stop.is_set():
                 return
             if pace:
                 if start_wall is None:
@@ -292,7 +306,9 @@ class Worker:
                     return
             self.stats.received += 1
             if not self._acquired.put(Received(item, time.time_ns())):
-                self.stats.dropped += 1
+                self._count_drop()
+            if self._enough():
+                return
 
     def _detect(self) -> None:
         try:
@@ -312,7 +328,7 @@ class Worker:
                         self.report(got.note)
                 got.detected_ns = time.time_ns()
                 if not self._detected.put(got):
-                    self.stats.dropped += 1
+                    self._count_drop()
         finally:
             self._detected.finish()
 
@@ -334,7 +350,6 @@ class Worker:
         if isinstance(item, SkippedFrame):
             self.stats.skipped += 1
             return [], f"skipped: {item.reason}", {}
-        t0 = time.perf_counter()
         try:
             if self.tracker is None or self.intrinsics != item.intrinsics:
                 self.tracker, self.intrinsics = self.make_tracker(item.intrinsics), item.intrinsics
@@ -351,8 +366,6 @@ class Worker:
             self.stats.tracker_state = "lost"
             self.report(reason)
             return [], "; ".join(r for r in (got.note, reason) if r), {}
-        finally:
-            self._tracking_s += time.perf_counter() - t0
         self.stats.tracker_state = result.state
         self._last_box = _box_of(result.joints2d)
         if got.note:
@@ -375,7 +388,8 @@ class Worker:
             self._period_published += 1
             self.stats.last_latency = latency
             self.stats.period_latencies.append(latency)
-            self.stats.all_latencies.append(latency)
+            if not self.drop_stale:  # replay reports them all at the end; serve runs for days
+                self.stats.all_latencies.append(latency)
 
     # ------------------------------------------------------------------ status
     def status_message(self) -> dict:
@@ -384,7 +398,7 @@ class Worker:
         with self._lock:
             lat = np.array(self.stats.period_latencies)
             self.stats.period_latencies = []
-            fps = self._period_published / max(now - self._period_start, 1e-9)
+            fps = self._period_published / max(now - self._period_start, self.status_period_s)
             self._period_start, self._period_published = now, 0
             errors = list(self.errors)
         s = self.stats
@@ -393,9 +407,7 @@ class Worker:
         return {
             "schema": "swarmpose.status", "version": 1, "camera": self.camera, "time_ns": time.time_ns(),
             "uptime_s": round(now - self._started, 3), "state": self.state, "fps": round(fps, 3),
-            "latency_ms": {"median": _round(np.median(lat)) if lat.size else None,
-                           "p95": _round(np.percentile(lat, 95)) if lat.size else None,
-                           "last": s.last_latency},
+            "latency_ms": {**latency_summary(lat), "last": s.last_latency},
             "frames": {"received": s.received, "published": s.published, "dropped": s.dropped,
                        "skipped": s.skipped, "failed": s.failed},
             "source": {"uri": self.source_uri, "state": self.source_state},
@@ -405,7 +417,11 @@ class Worker:
         }
 
     def _send_status(self) -> None:
-        message = self.status_message()
+        try:
+            message = self.status_message()
+        except Exception as exc:  # e.g. zenoh's state while the session closes: skip this status
+            self.report(f"status: {type(exc).__name__}: {exc_message(exc)}")
+            return
         for sink in self.sinks:
             try:
                 sink.status(message)
@@ -414,11 +430,18 @@ class Worker:
         if self.health_file:
             write_health_file(self.health_file, message)
         if self.log:
-            self.log(format_status(message))
+            try:
+                self.log(format_status(message))
+            except Exception:  # a closed stderr must not stop the worker
+                pass
 
 
-def _round(x: float) -> float:
-    return round(float(x), 3)
+def latency_summary(latencies_ms) -> dict:
+    """``{"median", "p95"}`` of latencies (ms), None for an empty list."""
+    lat = np.asarray(latencies_ms, float)
+    if not lat.size:
+        return {"median": None, "p95": None}
+    return {"median": round(float(np.median(lat)), 3), "p95": round(float(np.percentile(lat, 95)), 3)}
 
 
 def _device_name(tracker) -> str:

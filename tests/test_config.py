@@ -41,11 +41,13 @@ def test_environment_values_are_converted_by_field_type():
 @pytest.mark.parametrize(("env", "needle"), [
     ({"SWARMPOSE_MULTICAST": "maybe"}, "SWARMPOSE_MULTICAST"),
     ({"SWARMPOSE_PARTICLES": "many"}, "SWARMPOSE_PARTICLES"),
-    ({"SWARMPOSE_CAMERA_ID": "cam/0"}, "camera id 'cam/0'"),
-    ({"SWARMPOSE_TILE": "64by64"}, "tile must be WxH"),
-    ({"SWARMPOSE_ZENOH_MODE": "router"}, "zenoh_mode must be one of"),
-    ({"SWARMPOSE_RATE": "-1"}, "rate must be 0 or more"),
-    ({"SWARMPOSE_PARTICLES": "0"}, "particles must be at least 1"),
+    ({"SWARMPOSE_CAMERA_ID": "cam/0"}, "SWARMPOSE_CAMERA_ID: camera id 'cam/0'"),
+    ({"SWARMPOSE_TILE": "64by64"}, "SWARMPOSE_TILE: tile must be WxH"),
+    ({"SWARMPOSE_ZENOH_MODE": "router"}, "SWARMPOSE_ZENOH_MODE: zenoh_mode must be one of"),
+    ({"SWARMPOSE_RATE": "-1"}, "SWARMPOSE_RATE: rate must be a finite number, 0 or more"),
+    ({"SWARMPOSE_STATUS_PERIOD_S": "inf"}, "SWARMPOSE_STATUS_PERIOD_S: status_period_s must be a finite"),
+    ({"SWARMPOSE_REOPEN_S": "nan"}, "SWARMPOSE_REOPEN_S: reopen_s must be a finite"),
+    ({"SWARMPOSE_PARTICLES": "0"}, "SWARMPOSE_PARTICLES: particles must be at least 1"),
 ])
 def test_bad_values_name_the_variable_and_what_is_allowed(env, needle):
     with pytest.raises(ConfigError, match=needle.replace("(", r"\(")):

@@ -73,16 +73,21 @@ def test_replay_bad_input_exits_2_naming_it(wave_sequence, tmp_path, capsys):
 
 def test_serve_with_the_example_subscriber_beside_it(wave_sequence, tmp_path):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
+    health = tmp_path / "status.json"
     serve = subprocess.Popen([str(BIN / "swarmpose"), "serve", "--source", f"folder:{wave_sequence}",
                               "--camera-id", "kinect0", "--listen", endpoint, "--no-multicast", "--mode", "lift",
-                              "--rate", "5", "--loop"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                              "--rate", "5", "--loop", "--health-file", str(health), "--status-period", "0.3"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        time.sleep(1.5)
+        deadline = time.monotonic() + 60
+        while not (health.exists() and json.loads(health.read_text())["frames"]["published"] > 0):
+            assert time.monotonic() < deadline and serve.poll() is None, "the worker did not start"
+            time.sleep(0.2)
         sub = subprocess.run([sys.executable, str(REPO / "examples" / "subscribe.py"), "--connect", endpoint,
                               "--no-multicast", "--count", "4"], capture_output=True, text=True, timeout=120)
         assert sub.returncode == 0, sub.stderr
         lines = sub.stdout.splitlines()
-        assert lines[0].startswith(f"worker kinect0: folder:{wave_sequence} (640x480), body builtin")
+        assert any(x.startswith(f"worker kinect0: folder:{wave_sequence} (640x480), body builtin") for x in lines)
         frames = [x for x in lines if x.startswith("kinect0 frame")]
         assert len(frames) == 4 and all("body 0 tracking head (" in x for x in frames)
     finally:
