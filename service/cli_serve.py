@@ -97,7 +97,7 @@ def build_service(config: ServiceConfig, stack: ExitStack, *, replay: bool, out:
     from .worker import Worker
 
     config.require_source()
-    uri = f"folder:{config.source}" if Path(config.source).is_dir() else config.source
+    uri = config.source  # open_source takes bare folders and recording files as well as URIs
     tracker_config = TrackerConfig(mode=config.mode, pso=PsoConfig(particles=config.particles,
                                                                    generations=config.generations, variant=config.pso),
                                    tile=config.tile_size, triangles=config.triangles, seed=config.seed,
@@ -169,17 +169,19 @@ class ProgressSink:
 
 
 class ThrottledLog:
-    """Prints status lines on stderr at most every ``every_s`` seconds (and always the last)."""
+    """Prints status messages as lines on stderr: while running at most every ``every_s``
+    seconds, and every one once the worker is ending (its last words)."""
 
     def __init__(self, every_s: float = LOG_EVERY_S):
         self.every_s, self._last = every_s, -float("inf")
 
-    def __call__(self, line: str) -> None:
+    def __call__(self, status: dict) -> None:
+        from .worker import format_status
+
         now = time.monotonic()
-        final = " running:" not in line and " starting:" not in line
-        if final or now - self._last >= self.every_s:
+        if status["state"] not in ("starting", "running") or now - self._last >= self.every_s:
             self._last = now
-            print(line, file=sys.stderr, flush=True)
+            print(format_status(status), file=sys.stderr, flush=True)
 
 
 def _stop_on_signals(worker, stack: ExitStack) -> None:

@@ -4,10 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 from pathlib import Path
-
-import numpy as np
 
 from .errors import ConfigError
 
@@ -35,10 +32,6 @@ def add_track_options(p: argparse.ArgumentParser, add_body_options, positive_int
     p.add_argument("--quiet", action="store_true", help="no progress output")
 
 
-def _source_uri(seq: str) -> str:
-    return f"folder:{seq}" if os.path.isdir(seq) else seq
-
-
 def _tracker_config(args: argparse.Namespace):
     from .pso import PsoConfig
     from .tracker import TrackerConfig
@@ -59,7 +52,7 @@ def run_from_args(args: argparse.Namespace, out: Path | None):
 
     config = _tracker_config(args)
     body = load_body(args.body, args.shape)
-    source = open_source(_source_uri(args.seq))
+    source = open_source(args.seq)
     try:
         detector = make_detector(args.joints, source)
         try:
@@ -83,17 +76,10 @@ def cmd_track(args: argparse.Namespace) -> int:
 def evaluate_run(run, ground_truth) -> dict:
     """Δ, A(t) and coverage of a run against a sequence's ground truth, over the frames the run
     went through (a frame it skipped or could not estimate counts as a miss)."""
-    from .evaluate import joint_errors, summarise
+    from .evaluate import summarise_frames
 
     recorded = {r["frame"] for r in run.records}
-    rows = [i for i, f in enumerate(ground_truth.frames) if f in recorded]
-    truth = ground_truth.joints3d[rows]
-    estimates = np.full_like(truth, np.nan)
-    for k, row in enumerate(rows):
-        frame = ground_truth.frames[row]
-        if frame in run.estimates:
-            estimates[k] = run.estimates[frame]
-    return summarise(joint_errors(estimates, truth))
+    return summarise_frames(ground_truth, [f for f in ground_truth.frames if f in recorded], run.estimates)
 
 
 def cmd_eval(args: argparse.Namespace) -> int:

@@ -49,6 +49,19 @@ def summarise(errors_mm: np.ndarray, thresholds_mm=THRESHOLDS_MM) -> dict:
     }
 
 
+def summarise_frames(ground_truth, frames, estimates: dict[int, np.ndarray]) -> dict:
+    """:func:`summarise` over ``frames`` (frame numbers of ``ground_truth``, a
+    :class:`~swarmpose.groundtruth.GroundTruth`); ``estimates`` maps a frame to its (J, 3)
+    joints in m. A frame without an estimate counts as a miss on every joint."""
+    frames = list(frames)
+    truth = ground_truth.joints3d[[ground_truth.row(f) for f in frames]]
+    found = np.full_like(truth, np.nan)
+    for k, frame in enumerate(frames):
+        if frame in estimates:
+            found[k] = estimates[frame]
+    return summarise(joint_errors(found, truth))
+
+
 def plot_accuracy(curves: dict[str, dict[int, float]], path, title: str = "") -> None:
     """Draw A(t) curves (label -> {t mm: share}) as the paper's figures do: t on x, % on y."""
     import matplotlib

@@ -48,13 +48,6 @@ class TrackRun:
         return tracked / self.seconds if self.seconds > 0 else 0.0
 
 
-def _detection_box(result: TrackResult | None) -> np.ndarray | None:
-    if result is None or not np.any(np.isfinite(result.joints2d)):
-        return None
-    pts = result.joints2d[np.all(np.isfinite(result.joints2d), axis=1)]
-    return np.concatenate([pts.min(axis=0), pts.max(axis=0)])
-
-
 def _open_output(out: Path | None):
     if out is None:
         return None
@@ -106,7 +99,7 @@ def track_source(source, detector, tracker: Tracker | Callable[[Intrinsics], Tra
 
 def _track_frame(frame: Frame, detector, tracker: Tracker, last: TrackResult | None) -> tuple[dict, TrackResult | None]:
     try:
-        joints = detector.detect(frame, _detection_box(last))
+        joints = detector.detect(frame, None if last is None else last.joints_box())
     except SwarmposeError as exc:
         joints, note = None, f"detector failed: {exc}"
     else:

@@ -138,6 +138,14 @@ class TrackResult:
     objective: dict[str, float]
     timings_ms: dict[str, float]
 
+    def joints_box(self) -> np.ndarray | None:
+        """(4,) [u0, v0, u1, v1] px around the finite 2D joints (where to detect next), or None."""
+        ok = np.all(np.isfinite(self.joints2d), axis=1)
+        if not ok.any():
+            return None
+        pts = self.joints2d[ok]
+        return np.concatenate([pts.min(axis=0), pts.max(axis=0)])
+
     def as_dict(self) -> dict:
         """JSON-ready: joints by name, numbers rounded to µm / 0.01 px."""
         vec = json_vector

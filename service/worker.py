@@ -143,7 +143,7 @@ class Worker:
     (see :class:`~swarmpose.publish.sink.Sink`); camera: the camera id; drop_stale: live
     (True) or replay (False) hand-overs; pace_fps: deliver a recording at this rate (None:
     as fast as it reads); loop: start a recording over when it ends; max_frames: 0 = all;
-    log: called with one line per status period (None: quiet); info: extra fields for
+    log: called with each status message (None: quiet); info: extra fields for
     status (``source_uri``, ``detector``, ``opencl_device``) and ``zenoh_state`` a callable
     returning the status' ``zenoh`` part.
     """
@@ -152,7 +152,7 @@ class Worker:
                  *, camera: str, drop_stale: bool, pace_fps: float | None = None, loop: bool = False,
                  max_frames: int = 0, status_period_s: float = 1.0, reopen_s: float = 5.0,
                  source_uri: str = "", detector_spec: str = "", health_file: str = "",
-                 zenoh_state: Callable[[], dict] | None = None, log: Callable[[str], None] | None = None,
+                 zenoh_state: Callable[[], dict] | None = None, log: Callable[[dict], None] | None = None,
                  source: FrameSource | None = None):
         self.open_source, self.detector, self.make_tracker = open_source, detector, make_tracker
         self.sinks = list(sinks)
@@ -358,8 +358,8 @@ class Worker:
         except Exception as exc:  # a frame that fails to track: publish it without bodies, restart the track
             if self.tracker is not None:
                 self.tracker.reset()
-            reason = f"tracking failed: {type(exc).__name__}: {exc_message(exc)}" if not isinstance(
-                exc, SwarmposeError) else f"tracking failed: {exc}"
+            what = str(exc) if isinstance(exc, SwarmposeError) else f"{type(exc).__name__}: {exc_message(exc)}"
+            reason = f"tracking failed: {what}"
             self.stats.failed += 1
             self.stats.tracker_failures += 1
             self.stats.tracker_error = reason
@@ -367,7 +367,7 @@ class Worker:
             self.report(reason)
             return [], "; ".join(r for r in (got.note, reason) if r), {}
         self.stats.tracker_state = result.state
-        self._last_box = _box_of(result.joints2d)
+        self._last_box = result.joints_box()
         if got.note:
             self.stats.failed += 1
         return [body_entry(result)], got.note, result.timings_ms
@@ -431,7 +431,7 @@ class Worker:
             write_health_file(self.health_file, message)
         if self.log:
             try:
-                self.log(format_status(message))
+                self.log(message)
             except Exception:  # a closed stderr must not stop the worker
                 pass
 
@@ -448,15 +448,6 @@ def _device_name(tracker) -> str:
     scorer = getattr(getattr(tracker, "objective", None), "scorer", None)
     device = getattr(scorer, "device", None)
     return "" if device is None else f"{device.platform.name.strip()}: {device.name.strip()}"
-
-
-def _box_of(joints2d: np.ndarray) -> np.ndarray | None:
-    """(4,) [u0, v0, u1, v1] px around the finite 2D joints, or None."""
-    ok = np.all(np.isfinite(joints2d), axis=1)
-    if not ok.any():
-        return None
-    pts = joints2d[ok]
-    return np.concatenate([pts.min(axis=0), pts.max(axis=0)])
 
 
 def write_health_file(path: str, message: dict) -> None:

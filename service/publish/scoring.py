@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..evaluate import joint_errors, summarise
+from ..evaluate import summarise_frames
 from ..groundtruth import GroundTruth
 from ..model.skeleton import EVAL_JOINTS
 from ..sources.base import Frame
@@ -23,7 +23,9 @@ class ScoreSink:
 
     def frame(self, message: dict, frame: Frame | None) -> None:
         index = message["frame"]
-        if index not in self.ground_truth.frames:
+        try:
+            self.ground_truth.row(index)
+        except KeyError:  # a frame the sequence has no ground truth for
             return
         joints = np.full((len(EVAL_JOINTS), 3), np.nan)
         if message["bodies"]:
@@ -42,6 +44,4 @@ class ScoreSink:
 
     def summary(self) -> dict:
         """Δ (``mpjpe_mm``), ``A``, ``coverage``, ``frames``, ``per_joint_mm`` of the frames seen."""
-        rows = [self.ground_truth.row(f) for f in sorted(self.estimates)]
-        estimates = np.array([self.estimates[f] for f in sorted(self.estimates)]).reshape(-1, len(EVAL_JOINTS), 3)
-        return summarise(joint_errors(estimates, self.ground_truth.joints3d[rows]))
+        return summarise_frames(self.ground_truth, sorted(self.estimates), self.estimates)
