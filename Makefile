@@ -14,10 +14,12 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/ruff check service tests examples
+	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -q
 
 lint: $(STAMP)
 	$(BIN)/ruff check service tests examples
+	$(BIN)/lint-imports
 
 setup: $(STAMP)
 

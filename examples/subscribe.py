@@ -5,7 +5,7 @@
     python examples/subscribe.py --connect tcp/127.0.0.1:7447  # a worker listening there
     python examples/subscribe.py --mode client --connect tcp/zenoh:7447 --camera kinect0
 
-Uses :class:`swarmpose.client.Client` (pip install swarmpose): each frame message is a dict
+Uses :class:`swarmpose.publish.client.Client` (pip install swarmpose): each frame message is a dict
 following protocol/frame.schema.json; 3D joints are metres in the camera frame.
 """
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from swarmpose.client import Client, add_zenoh_options, format_frame, say
+from swarmpose.publish.client import Client, add_zenoh_options, format_frame, say
 
 
 def main() -> int:

@@ -26,7 +26,7 @@ for det in simulated movenet; do  # Table 2
   J=simulated; [ $det = movenet ] && J=$MOVENET
   for seq in walk-male jj-female jump-male; do
     for mode in lift hybrid joints depth; do
-      ev "t2-$seq-$det-$mode" "$OUT/$seq" --body $MH --shape "${SHAPE[$seq]}" --joints "$J" --mode $mode
+      ev "t2-$seq-$det-$mode" "$OUT/$seq" --body $MH --shape "${SHAPE[$seq]}" --detector "$J" --mode $mode
     done
   done
 done

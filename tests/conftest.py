@@ -13,6 +13,11 @@ ASSETS = SHARED / "assets"
 MAKEHUMAN = ASSETS / "bodies" / "makehuman"
 MOCAP = ASSETS / "mocap"
 
+MOVENET_COCO_BOUND_PX = 6.5
+"""Median keypoint error bound (px) of MoveNet on the COCO photo (detector test and its benchmark)."""
+BLAZEPOSE_COCO_BOUND_PX = 8.5
+"""The same for BlazePose on the annotated box."""
+
 needs_assets = pytest.mark.skipif(
     not ASSETS.is_dir(),
     reason=f"real assets not found at {ASSETS} (clone the project next to its shared/ folder, as CI does)",
@@ -32,7 +37,7 @@ def surface_distance(vertices: np.ndarray, triangles: np.ndarray, points: np.nda
 @pytest.fixture(scope="session")
 def wave_sequence(tmp_path_factory) -> Path:
     """A 6-frame synthetic sequence (built-in body waving, 30 fps) with ground truth."""
-    from swarmpose.cli import main
+    from swarmpose.cli.main import main
 
     out = tmp_path_factory.mktemp("wave")
     assert main(["synth", "--motion", "builtin:wave", "--frames", "6", "--out", str(out), "--quiet"]) == 0
@@ -41,6 +46,6 @@ def wave_sequence(tmp_path_factory) -> Path:
 
 def free_port() -> int:
     """A TCP port on 127.0.0.1 nobody listens on right now."""
-    from swarmpose.demo import free_local_port
+    from swarmpose.cli.demo import free_local_port
 
     return free_local_port()

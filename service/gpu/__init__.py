@@ -4,6 +4,6 @@
 stays cheap. See :mod:`swarmpose.gpu.scorer` for the one-launch-per-generation scorer.
 """
 
-from .errors import DeviceError, KernelBuildError
+from swarmpose.gpu.errors import DeviceError, KernelBuildError
 
 __all__ = ["DeviceError", "KernelBuildError"]

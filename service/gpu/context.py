@@ -1,6 +1,7 @@
 """Choosing an OpenCL device and making its context and queue.
 
-A device *spec* comes from ``--device`` or the environment variable ``SWARMPOSE_CL_DEVICE``:
+A device *spec* is the ``device`` setting (``--device``, ``SWARMPOSE_DEVICE`` or its older
+name ``SWARMPOSE_CL_DEVICE``; the environment is read where settings are loaded, never here):
 
 * ``None`` / empty: the first GPU if any, else a CPU device (PoCL preferred), else anything;
 * ``cpu`` or ``gpu``: the first device of that type (PoCL first among CPUs);
@@ -10,16 +11,26 @@ A device *spec* comes from ``--device`` or the environment variable ``SWARMPOSE_
 
 Nothing matching, or no OpenCL platform at all, raises :class:`DeviceError` listing what is
 available and how to get a CPU device (``pip install pocl-binary-distribution``).
+
+:class:`ClContext` is the explicit handle the scorer works with: one device, its context,
+its profiling queue and the programs built for it (memoised per context, at most
+:data:`MAX_PROGRAMS`). :meth:`ClContext.for_spec` shares one context per device among
+the trackers of a process (at most :data:`MAX_CONTEXTS` devices are kept).
 """
 
 from __future__ import annotations
 
-import os
+import functools
+from collections import OrderedDict
 from dataclasses import dataclass
 
-from .errors import DeviceError
+from swarmpose.gpu.errors import DeviceError
+from swarmpose.gpu.program import compile_program, define_options
 
-ENV_DEVICE = "SWARMPOSE_CL_DEVICE"
+MAX_PROGRAMS = 16
+"""Built programs kept per context (least recently used dropped first)."""
+MAX_CONTEXTS = 4
+"""Devices whose shared context :meth:`ClContext.for_spec` keeps."""
 POCL_HINT = ("install a CPU OpenCL driver with 'pip install pocl-binary-distribution' (Linux) "
              "or a GPU vendor's OpenCL ICD")
 
@@ -83,9 +94,7 @@ def _available(devices) -> str:
 
 
 def choose_device(spec: str | None = None):
-    """The ``pyopencl.Device`` named by ``spec`` (see the module docstring), or ``$SWARMPOSE_CL_DEVICE``."""
-    if spec is None:
-        spec = os.environ.get(ENV_DEVICE) or None
+    """The ``pyopencl.Device`` named by ``spec`` (see the module docstring; None or "": the default)."""
     devices = _all_devices()
     if not devices:
         raise DeviceError(f"OpenCL platforms exist but offer no device; {POCL_HINT}")
@@ -120,19 +129,54 @@ def choose_device(spec: str | None = None):
                       f"available: {_available(devices)}")
 
 
-_CONTEXTS: dict[int, tuple] = {}
+class ClContext:
+    """One OpenCL device with its context, profiling queue and built programs.
+
+    device: a ``pyopencl.Device``. Use :meth:`for_spec` to share one per device.
+    """
+
+    def __init__(self, device):
+        import pyopencl as cl
+
+        self.device = device
+        self.context = cl.Context([device])
+        self.queue = cl.CommandQueue(self.context, device, properties=cl.command_queue_properties.PROFILING_ENABLE)
+        self._programs: OrderedDict[tuple, object] = OrderedDict()
+
+    @staticmethod
+    def for_spec(spec: str | None = None) -> ClContext:
+        """The shared context of the device ``spec`` names (see the module docstring)."""
+        return _shared_context(choose_device(spec))
+
+    @property
+    def name(self) -> str:
+        """``platform: device``, as the status and info messages report it."""
+        return f"{self.device.platform.name.strip()}: {self.device.name.strip()}"
+
+    @property
+    def is_cpu(self) -> bool:
+        import pyopencl as cl
+
+        return bool(self.device.type & cl.device_type.CPU)
+
+    def program(self, filename: str, defines: dict[str, object] | None = None, extra_options: tuple[str, ...] = ()):
+        """The built ``pyopencl.Program`` of ``cl/<filename>`` with ``-D`` ``defines`` and other
+        build flags, memoised in this context; a failed build raises KernelBuildError."""
+        options = define_options(defines or {}) + tuple(extra_options)
+        key = (filename, options)
+        if key in self._programs:
+            self._programs.move_to_end(key)
+            return self._programs[key]
+        program = compile_program(self.context, filename, options)
+        self._programs[key] = program
+        while len(self._programs) > MAX_PROGRAMS:
+            self._programs.popitem(last=False)
+        return program
 
 
-def device_context(device):
-    """The shared ``(context, profiling queue)`` of ``device`` (made once per device)."""
-    import pyopencl as cl
-
-    key = device.int_ptr
-    if key not in _CONTEXTS:
-        ctx = cl.Context([device])
-        queue = cl.CommandQueue(ctx, device, properties=cl.command_queue_properties.PROFILING_ENABLE)
-        _CONTEXTS[key] = (ctx, queue)
-    return _CONTEXTS[key]
+@functools.lru_cache(maxsize=MAX_CONTEXTS)
+def _shared_context(device) -> ClContext:
+    return ClContext(device)
 
 
 def describe(device) -> str:

@@ -1,8 +1,8 @@
-"""Errors of the OpenCL layer, part of the :mod:`swarmpose.errors` hierarchy."""
+"""Errors of the OpenCL layer, part of the :mod:`swarmpose.core.errors` hierarchy."""
 
 from __future__ import annotations
 
-from ..errors import SwarmposeError
+from swarmpose.core.errors import SwarmposeError
 
 
 class DeviceError(SwarmposeError):

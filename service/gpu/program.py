@@ -3,9 +3,9 @@
 Sources are read with :mod:`importlib.resources`; ``#include "include/x.h"`` lines are
 expanded here (relative to the ``cl`` package, once per file), so the build needs no ``-I``
 path and the source text that is built and memoised covers the headers too. Compile-time
-sizes are passed as ``-D NAME=value`` options. Built programs are memoised per
-``(context, file, options)``; a failed build raises :class:`KernelBuildError` with the
-file, the options, the device and the build log.
+sizes are passed as ``-D NAME=value`` options. A failed build raises
+:class:`KernelBuildError` with the file, the options, the device and the build log. Built
+programs are memoised by their context (:meth:`swarmpose.gpu.context.ClContext.program`).
 """
 
 from __future__ import annotations
@@ -13,11 +13,10 @@ from __future__ import annotations
 import re
 from importlib import resources
 
-from .errors import KernelBuildError
+from swarmpose.gpu.errors import KernelBuildError
 
 PACKAGE = "swarmpose.cl"
 _INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$', re.MULTILINE)
-_PROGRAMS: dict[tuple, object] = {}
 
 
 def read_source(filename: str, _seen: frozenset = frozenset()) -> str:
@@ -50,25 +49,13 @@ def define_options(defines: dict[str, object]) -> tuple[str, ...]:
     return tuple(opts)
 
 
-def build_program(context, filename: str, defines: dict[str, object] | None = None,
-                  extra_options: tuple[str, ...] = ()):
-    """The built ``pyopencl.Program`` of ``cl/<filename>`` for ``context``, memoised.
-
-    defines: compile-time constants, passed as ``-D NAME=value``; extra_options: other
-    build flags (e.g. ``("-cl-fast-relaxed-math",)``).
-    """
+def compile_program(context, filename: str, options: tuple[str, ...]):
+    """Build ``cl/<filename>`` with ``options`` for ``context`` (no memo: see ``ClContext.program``)."""
     import pyopencl as cl
 
-    options = define_options(defines or {}) + tuple(extra_options)
-    key = (context.int_ptr, filename, options)
-    prg = _PROGRAMS.get(key)
-    if prg is not None:
-        return prg[1]
     source = read_source(filename)
     device = ", ".join(d.name.strip() for d in context.devices)
     try:
-        program = cl.Program(context, source).build(options=list(options))
+        return cl.Program(context, source).build(options=list(options))
     except cl.Error as exc:
         raise KernelBuildError(filename, options, device, str(exc)) from exc
-    _PROGRAMS[key] = (context, program)  # keep the context alive while its key is in use
-    return program

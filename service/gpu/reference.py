@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import check_shape
+from swarmpose.core.errors import check_shape
 
 COUNT_NAMES = ("observed", "rendered", "both", "close")
 """Per-particle counts: observed tile pixels (d_o > 0), rendered pixels (whole tile),

@@ -27,14 +27,13 @@ import time
 
 import numpy as np
 
-from ..camera import Intrinsics
-from ..errors import ConfigError, ShapeError
-from ..kinematics import as_poses, skinning_transforms
-from ..model.body import SkinnedBody
-from .context import choose_device, describe, device_context
-from .program import build_program
-from .reference import COUNT_NAMES
-from .tile import TileBox, clip_box
+from swarmpose.body.kinematics import as_poses, skinning_transforms
+from swarmpose.body.skinned import SkinnedBody
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import ConfigError, ShapeError
+from swarmpose.gpu.context import ClContext, describe
+from swarmpose.gpu.reference import COUNT_NAMES
+from swarmpose.gpu.tile import TileBox, clip_box
 
 __all__ = ["ParticleScorer", "COUNT_NAMES"]
 
@@ -43,8 +42,9 @@ class ParticleScorer:
     """Scores pose hypotheses of one body against one depth tile per frame.
 
     body: the (tracking level of detail of the) skinned body, used as given; intrinsics:
-    the camera's; tile: (TW, TH) tile pixels; threshold: T in m; device: a
-    ``pyopencl.Device``, a device spec (see :mod:`swarmpose.gpu.context`) or None;
+    the camera's; tile: (TW, TH) tile pixels; threshold: T in m; context: the
+    :class:`~swarmpose.gpu.context.ClContext` to run on, or a device spec (see
+    :mod:`swarmpose.gpu.context`; None or "": the default device);
     cull_backfaces: skip back faces (exact for closed meshes); local_size: work-items per
     particle (None: 1 on CPUs, 64 on other devices); atomic: use atomic_max on the local
     z-buffer (None: only when local_size > 1); znear: near plane in m.
@@ -55,7 +55,7 @@ class ParticleScorer:
     """
 
     def __init__(self, body: SkinnedBody, intrinsics: Intrinsics, tile: tuple[int, int] = (64, 64),
-                 threshold: float = 0.30, device=None, cull_backfaces: bool = True,
+                 threshold: float = 0.30, context: ClContext | str | None = None, cull_backfaces: bool = True,
                  local_size: int | None = None, atomic: bool | None = None, znear: float = 0.05):
         import pyopencl as cl
 
@@ -70,10 +70,9 @@ class ParticleScorer:
         self.threshold = float(threshold)
         if len(body.triangles) == 0:
             raise ShapeError(f"{body.name}: the body has no triangles to render")
-        self.device = device if isinstance(device, cl.Device) else choose_device(device)
-        self.context, self.queue = device_context(self.device)
-        is_cpu = bool(self.device.type & cl.device_type.CPU)
-        wg = int(local_size or (1 if is_cpu else 64))
+        self.cl_context = context if isinstance(context, ClContext) else ClContext.for_spec(context)
+        self.device, self.context, self.queue = self.cl_context.device, self.cl_context.context, self.cl_context.queue
+        wg = int(local_size or (1 if self.cl_context.is_cpu else 64))
         if wg < 1 or wg & (wg - 1) or wg > self.device.max_work_group_size:
             raise ConfigError(f"local_size {wg} must be a power of two <= {self.device.max_work_group_size}")
         self.local_size = wg
@@ -112,7 +111,7 @@ class ParticleScorer:
 
     def _kernel(self, write_tiles: bool):
         if write_tiles not in self._kernels:
-            prg = build_program(self.context, "score.cl", {**self.defines, "WRITE_TILES": write_tiles})
+            prg = self.cl_context.program("score.cl", {**self.defines, "WRITE_TILES": write_tiles})
             self._kernels[write_tiles] = self._cl.Kernel(prg, "score_particles")  # one per scorer
         return self._kernels[write_tiles]
 

@@ -1,6 +1,6 @@
 """The depth tile: how a TW x TH tile maps onto an image-space box B.
 
-Image pixel ``k`` has its centre at ``k`` (OpenCV, :mod:`swarmpose.camera`) and covers
+Image pixel ``k`` has its centre at ``k`` (OpenCV, :mod:`swarmpose.core.camera`) and covers
 ``[k - 0.5, k + 0.5)``. A box ``(u0, v0, bw, bh)`` (pixels, may be fractional) covers the
 pixel-index range ``[u0, u0 + bw) x [v0, v0 + bh)``, i.e. the continuous image region
 ``[u0 - 0.5, u0 + bw - 0.5) x [v0 - 0.5, v0 + bh - 0.5)``. Tile pixel ``(i, j)`` samples the
@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import Intrinsics
-from ..errors import ConfigError, ShapeError
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import ConfigError, ShapeError
 
 
 def _check_box(u0: float, v0: float, bw: float, bh: float) -> None:

@@ -12,7 +12,7 @@ a run that dies leaves files holding every frame written so far:
 * :class:`~swarmpose.publish.overlay.OverlaySink` — the skeleton drawn over the video.
 
 :func:`open_recording` opens all of them in one folder. A file that cannot be created or
-written raises :class:`~swarmpose.errors.OutputError` naming it.
+written raises :class:`~swarmpose.core.errors.OutputError` naming it.
 """
 
 from __future__ import annotations
@@ -25,13 +25,14 @@ from typing import IO
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..errors import OutputError, ShapeError
-from ..kinematics import forward_kinematics
-from ..messages import POSE_NAMES, encode
-from ..model.body import SkinnedBody
-from ..model.skeleton import EVAL_JOINTS, POSE_DIM
-from ..sources.base import Frame
-from .sink import Sink
+from swarmpose.body.kinematics import forward_kinematics
+from swarmpose.body.skeleton import EVAL_JOINTS, POSE_DIM
+from swarmpose.body.skinned import SkinnedBody
+from swarmpose.core.errors import OutputError, ShapeError
+from swarmpose.messages import POSE_NAMES, encode
+from swarmpose.publish.overlay import OverlaySink
+from swarmpose.publish.sink import Sink
+from swarmpose.sources.base import Frame
 
 FRAME_COLUMNS: tuple[str, ...] = ("frame", "capture_ns", "received_ns", "publish_ns", "latency_ms")
 BODY_COLUMNS: tuple[str, ...] = ("body_id", "state", "reason")
@@ -299,8 +300,6 @@ class BvhSink(_FileSink):
 def open_recording(out_dir: str | Path, body: SkinnedBody, fps: float = 30.0, overlay: bool = True) -> list[Sink]:
     """The replay sinks of folder ``out_dir`` (created if needed): poses.jsonl, poses.csv,
     poses.bvh (animating ``body`` at ``fps``) and, with ``overlay``, overlay.mp4."""
-    from .overlay import OverlaySink
-
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)

@@ -1,7 +1,7 @@
 """The overlay video: the tracked skeleton drawn over the colour frames, as an MP4.
 
 :class:`OverlaySink` draws, per frame message, the links of
-:data:`~swarmpose.model.skeleton.EVAL_LINKS` and a dot per evaluation joint (at the joint's
+:data:`~swarmpose.body.skeleton.EVAL_LINKS` and a dot per evaluation joint (at the joint's
 ``pixel``, coloured by its confidence: green = 1 .. red = 0) of the message's first body
 over the colour image (a turbo colour map of the depth where the frame has no colour),
 plus a line of text: frame number, state, latency and the reason, if any. A skipped frame
@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import OutputError
-from ..model.skeleton import EVAL_JOINTS, EVAL_LINKS
-from ..sources.base import Frame, exc_message
+from swarmpose.body.skeleton import EVAL_JOINTS, EVAL_LINKS
+from swarmpose.core.errors import OutputError
+from swarmpose.sources.base import Frame, exc_message
 
 CONTAINER_OPTIONS = {"movflags": "frag_every_frame+empty_moov+default_base_moof", "flush_packets": "1"}
 """Fragmented MP4, one fragment per frame, written through at once: playable if the process dies."""
@@ -114,7 +114,7 @@ def caption(message: dict, skipped: bool = False) -> str:
 class OverlaySink:
     """Writes the overlay MP4 at ``path`` (see the module docstring); ``fps`` frames per second.
 
-    Raises :class:`~swarmpose.errors.OutputError` naming the file when it cannot be created
+    Raises :class:`~swarmpose.core.errors.OutputError` naming the file when it cannot be created
     or written. A sink closed before its first frame leaves no file behind.
     """
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Protocol
 
-from ..sources.base import Frame
+from swarmpose.sources.base import Frame
 
 
 class Sink(Protocol):
@@ -14,7 +14,7 @@ class Sink(Protocol):
     and the :class:`~swarmpose.sources.base.Frame` it was made from (None for a frame the
     source could not deliver). ``status(message)``: a ``swarmpose.status`` message.
     ``close()``: flush and release; called once, also after errors. A sink raises
-    :class:`~swarmpose.errors.OutputError` when it cannot write; the worker reports that on
+    :class:`~swarmpose.core.errors.OutputError` when it cannot write; the worker reports that on
     the status and goes on with its other sinks.
     """
 

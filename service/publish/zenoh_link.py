@@ -13,7 +13,7 @@ A router that cannot be reached is not fatal: in client mode zenoh refuses to op
 sink retries every ``retry_s`` seconds (frames meanwhile are counted as ``unsent``) and says
 so in :meth:`ZenohSink.state`; in peer mode the session opens and zenoh keeps trying the
 ``connect`` endpoints itself. Malformed endpoints, a zenoh file that does not parse and a
-listen address that cannot be bound raise :class:`~swarmpose.errors.PublishError` at once.
+listen address that cannot be bound raise :class:`~swarmpose.core.errors.PublishError` at once.
 """
 
 from __future__ import annotations
@@ -23,9 +23,9 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 
-from ..errors import PublishError
-from ..messages import encode, keys
-from ..sources.base import Frame, exc_message
+from swarmpose.core.errors import PublishError
+from swarmpose.messages import encode, keys
+from swarmpose.sources.base import Frame, exc_message
 
 UNREACHABLE = "Unable to connect"
 

@@ -7,7 +7,7 @@ A :class:`FrameSource` yields frames (or :class:`SkippedFrame` where one could n
 it is a context manager and an iterator.
 
 Failure policy (every source): a source that cannot be opened raises
-:class:`~swarmpose.errors.SourceError` (or ``ConfigError`` for a malformed URI) from its
+:class:`~swarmpose.core.errors.SourceError` (or ``ConfigError`` for a malformed URI) from its
 constructor, and so does a failure before the first frame. Once a frame has been delivered,
 a failure never raises into the caller: a single unreadable frame is yielded as a
 :class:`SkippedFrame` and iteration goes on; a failure of the whole source (file truncated,
@@ -26,8 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import Intrinsics
-from ..errors import SourceError, SwarmposeError
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import SourceError, SwarmposeError
 
 MAX_RECONNECTS = 3
 """How often a live source tries to reopen its device after a failed read before it gives up."""

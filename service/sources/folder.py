@@ -19,7 +19,7 @@ A missing file (a colour image without depth or the reverse, a gap in the number
 differ in size is yielded as a :class:`~swarmpose.sources.base.SkippedFrame` whose reason
 names the file, and iteration goes on. Depth and colour of different sizes in the *first*
 complete frame, or images of another size than the intrinsics, raise
-:class:`~swarmpose.errors.SourceError` when the folder is opened: that is a folder of
+:class:`~swarmpose.core.errors.SourceError` when the folder is opened: that is a folder of
 unregistered images, not a damaged frame.
 """
 
@@ -33,11 +33,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import Intrinsics
-from ..errors import AssetError, SourceError
-from ..groundtruth import GroundTruth, load_ground_truth
-from .base import Frame, FrameSource, SkippedFrame
-from .imagefiles import MILLIMETRES, check_pair, image_size, load_intrinsics, read_color, read_depth
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import AssetError, SourceError
+from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
+from swarmpose.sources.groundtruth import GroundTruth, load_ground_truth
+from swarmpose.sources.imagefiles import MILLIMETRES, check_pair, image_size, load_intrinsics, read_color, read_depth
 
 COLOR_DIRS = ("color", "rgb", "image")
 COLOR_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -63,7 +63,7 @@ class FolderSource(FrameSource):
 
     Attributes: ``folder`` (Path), ``layout`` ("sequence" or "tum"), ``length`` (frame slots,
     skipped ones included), ``fps`` (Hz: ``sequence.json``'s, or TUM's median depth rate),
-    ``intrinsics``, ``ground_truth`` (:class:`~swarmpose.groundtruth.GroundTruth` from
+    ``intrinsics``, ``ground_truth`` (:class:`~swarmpose.sources.groundtruth.GroundTruth` from
     ``groundtruth.jsonl``, None if absent).
     """
 

@@ -3,7 +3,7 @@
 Depth files are single-channel uint16 PNGs in a fixed unit (millimetres: 1000 per metre;
 TUM RGB-D: 5000 per metre) and come out as float32 metres with 0 = no measurement.
 Colour files (PNG, JPEG) come out as uint8 RGB (H, W, 3). Every failure raises
-:class:`~swarmpose.errors.SourceError` naming the file, so folder readers can turn it into a
+:class:`~swarmpose.core.errors.SourceError` naming the file, so folder readers can turn it into a
 :class:`~swarmpose.sources.base.SkippedFrame`.
 """
 
@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import Intrinsics
-from ..errors import AssetError, SourceError
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import AssetError, SourceError
 
 MILLIMETRES = 1000.0
 """Depth units per metre of Open3D's and swarmpose's own PNGs."""

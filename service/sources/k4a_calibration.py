@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import Intrinsics
-from ..errors import SourceError
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import SourceError
 
 # mode -> (binned calibration resolution, crop offset, output resolution), from the Azure Kinect SDK
 DEPTH_MODES: dict[str, tuple[tuple[int, int], tuple[int, int], tuple[int, int]]] = {
@@ -61,7 +61,7 @@ class CameraModel:
 
     @property
     def pinhole(self) -> Intrinsics:
-        """The pinhole part (distortion dropped) as swarmpose :class:`~swarmpose.camera.Intrinsics`."""
+        """The pinhole part (distortion dropped) as swarmpose :class:`~swarmpose.core.camera.Intrinsics`."""
         k = self.K
         return Intrinsics(self.width, self.height, float(k[0, 0]), float(k[1, 1]), float(k[0, 2]), float(k[1, 2]))
 

@@ -36,10 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SourceError
-from .base import Frame, FrameSource, SkippedFrame, exc_message
-from .k4a_calibration import color_model, depth_mode_for_size, depth_model
-from .registration import DepthRegistration
+from swarmpose.core.errors import SourceError
+from swarmpose.sources.base import Frame, FrameSource, SkippedFrame, exc_message
+from swarmpose.sources.k4a_calibration import color_model, depth_mode_for_size, depth_model
+from swarmpose.sources.registration import DepthRegistration
 
 DEFAULT_FPS = 30.0
 

@@ -18,7 +18,7 @@
 
 Both live readers need their vendor library at run time (librealsense is inside Open3D's
 wheel; the Azure Kinect SDK's ``libk4a.so`` is not, and Debian has no package for it); when
-it, or the device, is missing the source raises :class:`~swarmpose.errors.SourceError`
+it, or the device, is missing the source raises :class:`~swarmpose.core.errors.SourceError`
 saying so. Live capture failures after the first frame follow the policy of
 :mod:`.base`: each failed capture is a :class:`~.base.SkippedFrame`, then the device is
 reopened, at most :data:`~.base.MAX_RECONNECTS` times in a row, before the source ends with
@@ -35,14 +35,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import Intrinsics
-from ..errors import ConfigError, SourceError
-from .base import CAPTURE_RETRIES, Frame, FrameSource, SkippedFrame, exc_message, live_frames
-from .imagefiles import MILLIMETRES, check_pair, depth_to_metres, load_intrinsics
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import ConfigError, SourceError
+from swarmpose.sources.base import CAPTURE_RETRIES, Frame, FrameSource, SkippedFrame, exc_message, live_frames
+from swarmpose.sources.imagefiles import MILLIMETRES, check_pair, depth_to_metres, load_intrinsics
 
 
 def intrinsics_from_open3d(intrinsic) -> Intrinsics:
-    """``open3d.camera.PinholeCameraIntrinsic`` -> :class:`~swarmpose.camera.Intrinsics`."""
+    """``open3d.camera.PinholeCameraIntrinsic`` -> :class:`~swarmpose.core.camera.Intrinsics`."""
     k = np.asarray(intrinsic.intrinsic_matrix, dtype=np.float64)
     return Intrinsics(int(intrinsic.width), int(intrinsic.height), float(k[0, 0]), float(k[1, 1]),
                       float(k[0, 2]), float(k[1, 2]))
@@ -264,7 +264,7 @@ class AzureKinectSource(_LiveSensorSource):
     def _factory_calibration(self) -> dict:
         """The device's calibration.json, from a one-frame recording made with Open3D's AzureKinectRecorder."""
         o3d = _open3d()
-        from .mkv import MkvSource
+        from swarmpose.sources.mkv import MkvSource
 
         with tempfile.TemporaryDirectory(prefix="swarmpose-k4a-") as tmp:
             path = Path(tmp) / "calibration.mkv"
@@ -301,7 +301,7 @@ class AzureKinectSource(_LiveSensorSource):
         if rgbd is None:
             return None
         if self.intrinsics is None:
-            from .k4a_calibration import color_model
+            from swarmpose.sources.k4a_calibration import color_model
             height = _pixels(rgbd.color).shape[0]
             self.intrinsics = color_model(self._calibration, height).pinhole
         return rgbd_to_frame(rgbd, self.intrinsics, MILLIMETRES, index, t_ns)

@@ -40,9 +40,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import Intrinsics
-from ..errors import SourceError
-from .base import Frame, FrameSource, SkippedFrame, exc_message, live_frames
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import SourceError
+from swarmpose.sources.base import Frame, FrameSource, SkippedFrame, exc_message, live_frames
 
 APT_PACKAGES = ("libopenni2-0", "libopenni2-dev")
 LIBRARY = "libOpenNI2.so"

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .k4a_calibration import CameraModel
+from swarmpose.sources.k4a_calibration import CameraModel
 
 UNDISTORT_TOLERANCE_PX = 0.05
 

@@ -17,19 +17,22 @@ Schemes (``scheme:argument``):
 
 A bare path to a ``.mkv``, ``.bag`` or ``.oni`` file is read with that file's scheme.
 
-Errors: an unknown scheme or a malformed argument raises :class:`~swarmpose.errors.ConfigError`
+Errors: an unknown scheme or a malformed argument raises :class:`~swarmpose.core.errors.ConfigError`
 listing the schemes; a missing file, device or library raises
-:class:`~swarmpose.errors.SourceError` naming it and what to do. After the first frame no
+:class:`~swarmpose.core.errors.SourceError` naming it and what to do. After the first frame no
 source raises: see :mod:`swarmpose.sources.base` for the failure policy (skipped frames,
 ``status``, bounded reconnects of live devices).
+
+Imports inside the functions are deliberate: each source module is imported when its scheme
+is used, so opening a folder never loads PyAV, Open3D's sensors or OpenNI2.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import ConfigError, SourceError
-from .base import FrameSource
+from swarmpose.core.errors import ConfigError, SourceError
+from swarmpose.sources.base import FrameSource
 
 SCHEMES = {
     "folder": "folder:DIR (swarmpose synth, Open3D color/+depth/ or TUM RGB-D folder)",
@@ -80,29 +83,29 @@ def open_source(uri: str) -> FrameSource:
     """Open the frame source ``uri`` names (see the module docstring); the caller closes it."""
     scheme, arg = _split(uri)
     if scheme == "folder":
-        from .folder import FolderSource
+        from swarmpose.sources.folder import FolderSource
         if not arg:
             raise ConfigError("folder: needs a directory, e.g. folder:/tmp/seq")
         return FolderSource(arg, uri=uri)
     if scheme == "rgbd":
-        from .still import StillSource
+        from swarmpose.sources.still import StillSource
         return StillSource.from_spec(arg, uri=uri)
     if scheme == "mkv":
         path = _existing_file(arg, "mkv")
-        from .mkv import MkvSource
+        from swarmpose.sources.mkv import MkvSource
         return MkvSource(path, uri=uri)
     if scheme == "bag":
         path = _existing_file(arg, "bag")
-        from .open3d_io import BagSource
+        from swarmpose.sources.open3d_io import BagSource
         return BagSource(path, uri=uri)
     if scheme == "realsense":
-        from .open3d_io import RealSenseSource
+        from swarmpose.sources.open3d_io import RealSenseSource
         return RealSenseSource(arg, uri=uri)
     if scheme == "azure":
-        from .open3d_io import AzureKinectSource
+        from swarmpose.sources.open3d_io import AzureKinectSource
         return AzureKinectSource(arg, uri=uri)
     if scheme == "openni2":
-        from .openni2 import OpenNI2Source
+        from swarmpose.sources.openni2 import OpenNI2Source
         if arg.lower().endswith(".oni"):
             return OpenNI2Source(file=_existing_file(arg, "openni2"), uri=uri)
         return OpenNI2Source(device_uri=arg or None, uri=uri)

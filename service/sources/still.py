@@ -4,7 +4,7 @@ The depth PNG is uint16 in the units the intrinsics file states (``depth_scale``
 metres per unit, or 1000 = units per metre), millimetres when it states none. The
 intrinsics file is Open3D's PinholeCameraIntrinsic JSON or ``{width, height, fx, fy, cx, cy}``.
 The frame has index 0 and timestamp 0; depth and colour of different sizes, or of another
-size than the intrinsics, raise :class:`~swarmpose.errors.SourceError` when opening.
+size than the intrinsics, raise :class:`~swarmpose.core.errors.SourceError` when opening.
 """
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ from __future__ import annotations
 from collections.abc import Iterator
 from pathlib import Path
 
-from ..errors import ConfigError, SourceError
-from .base import Frame, FrameSource, SkippedFrame
-from .imagefiles import MILLIMETRES, check_pair, load_intrinsics, read_color, read_depth
+from swarmpose.core.errors import ConfigError, SourceError
+from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
+from swarmpose.sources.imagefiles import MILLIMETRES, check_pair, load_intrinsics, read_color, read_depth
 
 
 class StillSource(FrameSource):

@@ -1,0 +1,7 @@
+"""``python -m swarmpose ...`` is the ``swarmpose`` command."""
+
+import sys
+
+from swarmpose.cli.main import main
+
+sys.exit(main())

@@ -1,0 +1,59 @@
+"""``swarmpose bench score`` and ``swarmpose bench detect``: the benchmarks BENCHMARKS.md records."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from swarmpose.bench.detect import bench_detectors, format_detect_bench
+from swarmpose.bench.score import bench_score, format_bench
+from swarmpose.cli.common import DEFAULTS, add_body_options, positive_int
+from swarmpose.core.errors import ConfigError
+from swarmpose.core.settings import parse_size
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        return parse_size(text, "tile")
+    except ConfigError as exc:  # say it argparse's way (usage line, exit 2)
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def cmd_bench_score(args: argparse.Namespace) -> int:
+    """Hypotheses per second of the OpenCL scorer against the Open3D ray-casting baseline."""
+    result = bench_score(particles=args.particles, resolution=args.tile, body=args.body, shape=args.shape,
+                         repeats=args.repeats, device=args.device, lod=args.triangles)
+    print(json.dumps(result) if args.json else format_bench(result))
+    return 0
+
+
+def cmd_bench_detect(args: argparse.Namespace) -> int:
+    """Time per frame and COCO-photo error of the ONNX 2D detectors."""
+    result = bench_detectors(repeats=args.repeats, assets=args.assets, threads=args.threads)
+    print(json.dumps(result) if args.json else format_detect_bench(result))
+    return 0
+
+
+def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+    """Register ``bench score`` and ``bench detect``."""
+    bench = sub.add_parser("bench", help="benchmarks").add_subparsers(dest="bench", required=True, metavar="BENCH")
+    p = bench.add_parser("score", parents=[common], formatter_class=DEFAULTS,
+                         help="OpenCL scorer vs the Open3D ray-casting baseline, hypotheses per second")
+    add_body_options(p)
+    p.add_argument("--particles", type=positive_int, default=64, help="hypotheses per generation")
+    p.add_argument("--tile", "--resolution", dest="tile", type=_size, default=(64, 64),
+                   help="depth tile WxH pixels over the person's box")
+    p.add_argument("--triangles", type=positive_int, default=1500, help="tracking level of detail, triangles")
+    p.add_argument("--repeats", type=positive_int, default=20, help="timed generations (medians)")
+    p.add_argument("--device", default="", help="OpenCL device: cpu, gpu, P:D or part of its name (empty: a GPU, "
+                                                "else PoCL)")
+    p.add_argument("--json", action="store_true", help="one JSON object")
+    p.set_defaults(func=cmd_bench_score)
+    p = bench.add_parser("detect", parents=[common], formatter_class=DEFAULTS,
+                         help="ONNX 2D detectors: time per frame and error on a COCO photo")
+    p.add_argument("--repeats", type=positive_int, default=20, help="timed runs per detector and image (medians)")
+    p.add_argument("--threads", type=positive_int, default=None, help="onnxruntime threads (default: half the cores)")
+    p.add_argument("--assets", default=None,
+                   help="shared assets folder (default: $SWARMPOSE_ASSETS or ../shared/assets)")
+    p.add_argument("--json", action="store_true", help="one JSON object")
+    p.set_defaults(func=cmd_bench_detect)

@@ -1,0 +1,51 @@
+"""Pieces every subcommand shares: verbosity flags, positive integers, body options."""
+
+from __future__ import annotations
+
+import argparse
+
+
+class DefaultsFormatter(argparse.HelpFormatter):
+    """Help that shows each option's default, unless its text already does or there is none."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if ("(default" in text or not action.option_strings or action.default in (None, False, "", [])
+                or action.default is argparse.SUPPRESS):
+            return text
+        return text + " (default: %(default)s)"
+
+
+DEFAULTS = DefaultsFormatter
+
+
+def verbosity_parent(top: bool = False) -> argparse.ArgumentParser:
+    """``-v/--verbose`` and ``-q/--quiet`` (counted), accepted before and after the subcommand."""
+    p = argparse.ArgumentParser(add_help=False)
+    default = 0 if top else argparse.SUPPRESS
+    p.add_argument("-v", "--verbose", action="count", default=default, help="more log output (debug)")
+    p.add_argument("-q", "--quiet", action="count", default=default,
+                   help="less output: warnings only, no progress bars")
+    return p
+
+
+def quiet(args: argparse.Namespace) -> bool:
+    """True when progress bars should stay off."""
+    return getattr(args, "verbosity", 0) < 0
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an integer of at least 1."""
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def add_body_options(p: argparse.ArgumentParser) -> None:
+    """``--body`` and ``--shape`` for the commands that take no other settings."""
+    p.add_argument("--body", default="builtin", help="'builtin', 'makehuman:DIR' or a .glb/.gltf file")
+    p.add_argument("--shape", default=None,
+                   help="shape preset: builtin presets (default, male, female, male-heavy, ...) or "
+                        "'height=1.8,torso=1.1,arms=1,legs=1'; MakeHuman presets (male, female, male-heavy, "
+                        "female-slim, male-tall, female-short, ...)")

@@ -1,0 +1,122 @@
+"""``swarmpose serve``, ``replay`` and ``health``: the tracking service.
+
+``serve`` runs the worker on a source and publishes over zenoh until the source ends (a
+recording; ``--loop`` starts it over) or SIGINT/SIGTERM (a live camera is reopened when it
+fails). ``replay`` runs the same pipeline over a recording as fast as it goes, without
+dropping frames, writing poses.jsonl / poses.csv / poses.bvh / overlay.mp4, and prints Δ
+and A(t) when the folder has ground truth. Settings: :mod:`swarmpose.cli.settings` (flags >
+``SWARMPOSE_*`` > ``--config`` TOML > defaults).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import time
+from contextlib import ExitStack
+from pathlib import Path
+
+from swarmpose.cli.common import DEFAULTS, quiet
+from swarmpose.cli.settings import add_flags, load
+from swarmpose.cli.track import add_source_argument, settings_of
+from swarmpose.core.errors import ConfigError
+from swarmpose.messages.schema import keys
+from swarmpose.pipeline.config import ServiceConfig
+from swarmpose.pipeline.service import build_worker, format_summary, run_summary
+from swarmpose.pipeline.worker import Worker
+
+REPLAY_DEFAULTS = {"zenoh_mode": "off"}
+
+
+def _stop_on_signals(worker: Worker, stack: ExitStack) -> None:
+    """SIGINT and SIGTERM stop ``worker``; ``stack`` puts the previous handlers back."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        previous = signal.signal(sig, lambda *_: worker.stop())
+        stack.callback(signal.signal, sig, previous)
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    """Run the worker and publish over zenoh until the source ends or a signal comes."""
+    config = settings_of(args)
+    with ExitStack() as stack:
+        worker, _, _ = build_worker(config, stack, replay=False)
+        _stop_on_signals(worker, stack)
+        z = config.zenoh
+        where = f"zenoh {z.zenoh_mode}" + (f", connect {', '.join(z.connect)}" if z.connect else "") + (
+            f", listen {', '.join(z.listen)}" if z.listen else "")
+        print(f"swarmpose serve: {config.source} -> {', '.join(keys(config.camera_id).values())} ({where}); "
+              "Ctrl-C stops", file=sys.stderr)
+        worker.run()
+    return 1 if worker.state in ("source-failed", "failed") else 0
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    """Track a recording frame by frame into files; Δ and A(t) when it has ground truth."""
+    config = settings_of(args, REPLAY_DEFAULTS)
+    with ExitStack() as stack:
+        worker, parts, _ = build_worker(config, stack, replay=True, out=args.out, progress=not quiet(args))
+        _stop_on_signals(worker, stack)
+        started = time.monotonic()
+        stats = worker.run()
+    result = run_summary(parts, stats, time.monotonic() - started, worker)
+    print(json.dumps(result) if args.json else format_summary(result))
+    return 1 if worker.state in ("source-failed", "failed") else 0
+
+
+def cmd_health(args: argparse.Namespace) -> int:
+    """Exit 0 when the worker's status file is fresh and it is running, 1 otherwise (docker HEALTHCHECK)."""
+    try:
+        path = args.file or load(ServiceConfig, {}).health_file
+    except ConfigError as exc:  # exit 1, not 2: docker reserves 2 in health checks
+        print(f"unhealthy: {exc}")
+        return 1
+    if not path:
+        print("unhealthy: no status file: pass --file or set SWARMPOSE_HEALTH_FILE (the worker writes it)")
+        return 1
+    try:
+        status = json.loads(Path(path).read_text(encoding="utf-8"))
+        age = (time.time_ns() - int(status["time_ns"])) / 1e9
+        state = status["state"]
+    except FileNotFoundError:
+        print(f"unhealthy: no status in {path} yet (the worker has not run a status period)")
+        return 1
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        print(f"unhealthy: {path} is not a status message ({exc})")
+        return 1
+    if age > args.max_age:
+        print(f"unhealthy: last status {age:.1f} s old (> {args.max_age:g} s); the worker is stuck or gone")
+        return 1
+    if state not in ("starting", "running"):
+        print(f"unhealthy: worker state {state} (source {status['source']['state']})")
+        return 1
+    print(f"healthy: {state}, {status['fps']:.2f} fps, source {status['source']['state']}")
+    return 0
+
+
+def _service_parser(sub: argparse._SubParsersAction, common: argparse.ArgumentParser, name: str, text: str,
+                    defaults: dict | None = None) -> argparse.ArgumentParser:
+    p = sub.add_parser(name, parents=[common], formatter_class=DEFAULTS, help=text)
+    add_source_argument(p)
+    add_flags(p, ServiceConfig, defaults=defaults)
+    p.add_argument("--config", dest="config_file", default=None, help="TOML file of settings ($SWARMPOSE_CONFIG)")
+    return p
+
+
+def add_service_commands(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+    """Register ``serve``, ``replay`` and ``health``."""
+    p = _service_parser(sub, common, "serve", "track a camera or recording and publish over zenoh (long-running)")
+    p.set_defaults(func=cmd_serve)
+
+    p = _service_parser(sub, common, "replay", "track a recording into poses.jsonl/csv/bvh + overlay.mp4 (Δ, A(t) "
+                                               "with ground truth)", REPLAY_DEFAULTS)
+    p.add_argument("--out", required=True, help="output folder (created)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_replay)
+
+    p = sub.add_parser("health", parents=[common], formatter_class=DEFAULTS,
+                       help="exit 0 if the worker's status file is fresh and it runs (docker HEALTHCHECK)")
+    p.add_argument("--file", default=None, help="the status file (default $SWARMPOSE_HEALTH_FILE)")
+    p.add_argument("--max-age", type=float, default=15.0, help="seconds after which a status counts as stale")
+    p.set_defaults(func=cmd_health)

@@ -1,0 +1,152 @@
+"""Settings from the command line, the environment and a TOML file, in layers.
+
+Later layers win: the defaults (the dataclass', then a command's own) < a TOML file
+(``--config FILE`` or ``$SWARMPOSE_CONFIG``; keys are setting names, at the top level, in a
+``[swarmpose]`` table or in section tables such as ``[tracker]`` and ``[zenoh]``) <
+environment variables ``SWARMPOSE_<NAME>`` < flags. Flags are generated from the settings'
+declarations (:mod:`swarmpose.core.settings`), each showing its default; a wrong value
+anywhere raises :class:`~swarmpose.core.errors.ConfigError` naming the setting, where it
+came from and what is allowed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Iterable, Mapping
+from dataclasses import fields
+from pathlib import Path
+from typing import Any, TypeVar
+
+from swarmpose.core.errors import ConfigError
+from swarmpose.core.settings import build, convert, default_of, format_value, leaves
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+ENV_PREFIX = "SWARMPOSE_"
+ENV_CONFIG = "SWARMPOSE_CONFIG"
+T = TypeVar("T")
+
+
+def aliases(cls: type) -> dict[str, str]:
+    """Older names of settings -> their current name."""
+    return {alias: name for name, (_, f) in leaves(cls).items() for alias in f.metadata["aliases"]}
+
+
+def environment_names(cls: type) -> dict[str, str]:
+    """Every ``SWARMPOSE_*`` variable ``cls`` reads -> its setting (aliases included)."""
+    names = {ENV_PREFIX + name.upper(): name for name in leaves(cls)}
+    names.update({ENV_PREFIX + alias.upper(): name for alias, name in aliases(cls).items()})
+    return names
+
+
+def add_flags(parser: argparse.ArgumentParser, cls: type, only: Iterable[str] | None = None,
+              defaults: Mapping[str, Any] | None = None) -> None:
+    """One flag per leaf setting of ``cls`` (or those in ``only``), default None so the other
+    layers show through; ``--help`` shows each default (``defaults`` over the dataclass')."""
+    wanted = None if only is None else set(only)
+    by_section: dict[str, argparse._ArgumentGroup] = {}
+    for name, (path, f) in leaves(cls).items():
+        if wanted is not None and name not in wanted:
+            continue
+        meta = f.metadata
+        group = parser
+        if path:
+            group = by_section.setdefault(path[0], parser.add_argument_group(f"{path[0]} settings"))
+        default = (defaults or {}).get(name, default_of(f))
+        flag = "--" + name.replace("_", "-")
+        names = [flag] + ["--" + a.replace("_", "-") for a in meta["aliases"]]
+        text = f"{meta['help']} (default: {format_value(default)})"
+        if meta["kind"] == "bool":
+            group.add_argument(*names, dest=name, default=None, action=argparse.BooleanOptionalAction, help=text)
+        elif meta["kind"] == "list":
+            group.add_argument(*names, dest=name, default=None, action="append", metavar="VALUE",
+                               help=text + "; repeatable")
+        else:
+            group.add_argument(*names, dest=name, default=None, help=text,
+                               choices=meta["choices"] or None, metavar=None if meta["choices"] else name.upper())
+
+
+def read_toml(path: str | Path, cls: type) -> dict:
+    """The settings of a TOML file: top level, a ``[swarmpose]`` table and section tables."""
+    path = Path(path).expanduser()
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"config file {path} does not exist; pass an existing TOML file to --config") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"config file {path} cannot be read: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"config file {path} is not valid TOML: {exc}") from None
+    data = data.get("swarmpose", data)
+    known, alias = leaves(cls), aliases(cls)
+    sections = {f.name for f in fields(cls) if "section" in f.metadata}
+    flat: dict[str, Any] = {}
+    for key, value in data.items():
+        if key in sections and isinstance(value, dict):
+            flat.update(value)
+        else:
+            flat[key] = value
+    settings = {}
+    for key, value in flat.items():
+        name = key.replace("-", "_")
+        name = alias.get(name, name)
+        if name not in known:
+            raise ConfigError(f"config file {path}: unknown key {key!r}; keys are {', '.join(sorted(known))}")
+        settings[name] = convert(name, known[name][1].metadata["kind"], value, f"config file {path}")
+    return settings
+
+
+def from_environment(env: Mapping[str, str], cls: type) -> dict:
+    """The settings of ``SWARMPOSE_<NAME>`` variables (current names win over older ones)."""
+    known, settings = leaves(cls), {}
+    for var, name in sorted(environment_names(cls).items(), key=lambda kv: kv[0] == ENV_PREFIX + kv[1].upper()):
+        if var in env:
+            settings[name] = convert(name, known[name][1].metadata["kind"], env[var], f"environment variable {var}")
+    return settings
+
+
+def load(cls: type[T], flags: Mapping[str, Any] | None = None, config_file: str | None = None,
+         env: Mapping[str, str] | None = None, defaults: Mapping[str, Any] | None = None) -> T:
+    """``defaults`` < ``config_file`` (or ``$SWARMPOSE_CONFIG``) < environment < ``flags``
+    (setting name -> value; None = not given)."""
+    env = os.environ if env is None else env
+    known = leaves(cls)
+    settings: dict[str, Any] = dict(defaults or {})
+    origins: dict[str, str] = {}
+    path = config_file or env.get(ENV_CONFIG)
+    if path:
+        from_file = read_toml(path, cls)
+        settings.update(from_file)
+        origins.update({name: f"config file {path}" for name in from_file})
+    from_env = from_environment(env, cls)
+    settings.update(from_env)
+    read = {name: var for var, name in environment_names(cls).items() if var in env}  # older names first
+    read.update({name: var for var, name in environment_names(cls).items()
+                 if var in env and var == ENV_PREFIX + name.upper()})
+    origins.update({name: f"environment variable {read[name]}" for name in from_env})
+    for name, value in (flags or {}).items():
+        if value is None:
+            continue
+        if name not in known:
+            raise ConfigError(f"unknown setting {name!r}")
+        origin = f"flag --{name.replace('_', '-')}"
+        settings[name] = convert(name, known[name][1].metadata["kind"], value, origin)
+        origins[name] = origin
+    try:
+        return build(cls, settings)
+    except ConfigError as exc:
+        text = str(exc)
+        culprit = next((n for n in origins if text.startswith(n) or text.startswith(n.replace("_", " "))
+                        or (text.startswith("camera id") and n == "camera_id")), None)
+        raise ConfigError(f"{origins[culprit]}: {text}" if culprit else text) from None
+
+
+def from_args(cls: type[T], args: argparse.Namespace, defaults: Mapping[str, Any] | None = None) -> T:
+    """Settings of parsed flags (those ``add_flags`` made) over the environment, file and defaults."""
+    flags = {name: getattr(args, name) for name in leaves(cls) if hasattr(args, name)}
+    return load(cls, flags, config_file=getattr(args, "config_file", None), defaults=defaults)

@@ -1,0 +1,57 @@
+"""``swarmpose subscribe``: print the poses workers publish, as they arrive."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from swarmpose.cli.common import DEFAULTS
+from swarmpose.core.errors import SwarmposeError
+from swarmpose.messages.describe import format_status
+from swarmpose.publish.client import Client, add_zenoh_options, format_frame, say
+
+
+def add_subscribe_args(p: argparse.ArgumentParser) -> None:
+    """The flags of ``swarmpose subscribe``."""
+    p.add_argument("--camera", default="*", help="camera id (default: every camera)")
+    p.add_argument("--count", type=int, default=0, help="stop after this many frames (default 0 = never)")
+    p.add_argument("--timeout", type=float, default=0.0,
+                   help="stop when no frame came for this many seconds (default 0 = wait forever)")
+    p.add_argument("--status", action="store_true", help="also print status messages")
+    add_zenoh_options(p)
+
+
+def cmd_subscribe(args: argparse.Namespace) -> int:
+    """Print frames (and optionally status) until --count frames, --timeout or Ctrl-C."""
+    try:
+        client = Client(args.camera, mode=args.mode, connect=args.connect, listen=args.listen,
+                        multicast=not args.no_multicast, config_file=args.zenoh_config)
+    except SwarmposeError as exc:
+        print(f"swarmpose subscribe: error: {exc}", file=sys.stderr)
+        return 2
+    if args.status:
+        client.on_status(lambda m: say(format_status(m)))
+    say(f"listening on {client.keys['frame']} ...")
+    received = 0
+    try:
+        with client:
+            for message in client.frames(timeout=args.timeout or None, count=args.count or None):
+                received += 1
+                say(format_frame(message))
+    except KeyboardInterrupt:
+        pass
+    if client.rejected:
+        print(f"rejected {client.rejected} messages; last: {client.last_error}", file=sys.stderr)
+    if args.count and received < args.count:
+        print(f"swarmpose subscribe: got {received} of {args.count} frames before the {args.timeout:g} s timeout",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+def add_subscribe_command(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+    """Register ``subscribe``."""
+    p = sub.add_parser("subscribe", parents=[common], formatter_class=DEFAULTS,
+                       help="print the poses workers publish over zenoh, as they arrive")
+    add_subscribe_args(p)
+    p.set_defaults(func=cmd_subscribe)

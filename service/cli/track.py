@@ -1,0 +1,104 @@
+"""``swarmpose track`` and ``swarmpose eval``: the tracker over a sequence, and its Δ / A(t).
+
+Both run the sequential pipeline (:mod:`swarmpose.pipeline.run`): one thread, every frame.
+``--out DIR`` gets the same files as ``replay`` (``poses.jsonl`` of frame messages,
+``poses.csv``, ``poses.bvh``, ``overlay.mp4`` unless ``--no-overlay``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from contextlib import ExitStack
+
+from swarmpose.body.skeleton import EVAL_JOINTS
+from swarmpose.cli.common import DEFAULTS, quiet
+from swarmpose.cli.settings import add_flags, from_args
+from swarmpose.core.errors import ConfigError
+from swarmpose.core.settings import leaves
+from swarmpose.pipeline.config import ServiceConfig
+from swarmpose.pipeline.run import RunSummary, run_sequence
+from swarmpose.pipeline.service import Parts, format_accuracy, open_parts, score_summary
+from swarmpose.sim.evaluate import plot_accuracy
+from swarmpose.tracking.config import TrackerConfig
+
+TRACK_SETTINGS = ("source", "detector", "body", "shape", *leaves(TrackerConfig), "camera_id", "frames", "overlay")
+"""The settings ``track`` and ``eval`` take (``serve`` and ``replay`` take these and the service's)."""
+
+
+def add_source_argument(p: argparse.ArgumentParser) -> None:
+    """The optional positional SEQ: the same as ``--source``."""
+    p.add_argument("seq", metavar="SEQ", nargs="?", default=None,
+                   help="the frame source, as --source (a sequence folder or any source URI)")
+
+
+def settings_of(args: argparse.Namespace, defaults: dict | None = None) -> ServiceConfig:
+    """The settings of a command's flags (SEQ stands for --source) over the other layers."""
+    if args.seq is not None:
+        if args.source is not None and args.source != args.seq:
+            raise ConfigError(f"two sources: SEQ {args.seq!r} and --source {args.source!r}; give one")
+        args.source = args.seq
+    return from_args(ServiceConfig, args, defaults)
+
+
+def run_tracking(args: argparse.Namespace, *, score: bool) -> tuple[ServiceConfig, Parts, RunSummary]:
+    """Open the parts of the command's settings, track every frame into ``--out``."""
+    config = settings_of(args)
+    with ExitStack() as stack:
+        parts = open_parts(config, stack, out=args.out or "", score=score)
+        summary = run_sequence(parts.source, parts.pipeline, parts.sinks, camera=config.camera_id,
+                               frames=config.frames, progress=not quiet(args))
+    return config, parts, summary
+
+
+def cmd_track(args: argparse.Namespace) -> int:
+    """Track a sequence; the frame messages and files in --out."""
+    _, parts, run = run_tracking(args, score=False)
+    states = ", ".join(f"{k} {v}" for k, v in sorted(run.states.items()))
+    print(f"tracked {run.frames} frames ({states}) at {run.fps:.2f} frames/s; poses in {args.out}/poses.jsonl")
+    return 0 if not run.sink_errors else 1
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    """Track a synthetic sequence and report Δ and A(t) against its ground truth."""
+    config, parts, run = run_tracking(args, score=True)
+    if parts.score is None:
+        raise ConfigError(f"{config.source} has no groundtruth.jsonl; eval needs a sequence from `swarmpose synth`")
+    accuracy = score_summary(parts) or {"mpjpe_mm": None, "coverage": 0.0, "A": {}, "per_joint_mm": []}
+    t = config.tracker
+    result = {**{k: accuracy[k] for k in ("mpjpe_mm", "A", "coverage")}, "fps": run.fps, "frames": run.frames,
+              "states": run.states, "mode": t.mode, "detector": config.detector, "body": config.body,
+              "shape": config.shape, "particles": t.particles, "generations": t.generations, "pso": t.pso,
+              "depth_weight": t.depth_weight, "joints_weight": t.joints_weight, "seed": t.seed,
+              "per_joint_mm": dict(zip(EVAL_JOINTS, accuracy["per_joint_mm"]))}
+    if args.plot:
+        plot_accuracy({t.mode: {int(k): v for k, v in accuracy["A"].items()}}, args.plot, title=config.source)
+        result["plot"] = args.plot
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(f"{config.source}: mode {t.mode}, {run.frames} frames at {run.fps:.2f} frames/s")
+        print("\n".join("  " + line for line in format_accuracy(accuracy)))
+    return 0 if not run.sink_errors else 1
+
+
+def add_track_commands(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
+    """Register ``track`` and ``eval``."""
+    p = sub.add_parser("track", parents=[common], formatter_class=DEFAULTS,
+                       help="track a sequence or recording into poses.jsonl/csv/bvh (+ overlay.mp4)")
+    add_source_argument(p)
+    add_flags(p, ServiceConfig, TRACK_SETTINGS)
+    p.add_argument("--out", required=True, help="output folder (created): poses.jsonl, poses.csv, poses.bvh, "
+                                                "overlay.mp4")
+    p.add_argument("--config", dest="config_file", default=None, help="TOML file of settings ($SWARMPOSE_CONFIG)")
+    p.set_defaults(func=cmd_track)
+
+    p = sub.add_parser("eval", parents=[common], formatter_class=DEFAULTS,
+                       help="track a synthetic sequence and report Δ and A(t) against its ground truth")
+    add_source_argument(p)
+    add_flags(p, ServiceConfig, TRACK_SETTINGS)
+    p.add_argument("--out", default=None, help="also write the files of `track` into this folder")
+    p.add_argument("--config", dest="config_file", default=None, help="TOML file of settings ($SWARMPOSE_CONFIG)")
+    p.add_argument("--json", action="store_true", help="one JSON object")
+    p.add_argument("--plot", default=None, help="draw A(t) into this PNG")
+    p.set_defaults(func=cmd_eval)

@@ -1,0 +1,139 @@
+"""A simulated 2D joint detector: ground truth plus a documented, seeded noise model.
+
+For each frame, with ``s`` = the person's size in pixels (the larger side of the box
+around all of the body's projected named points):
+
+* **jitter**: every keypoint moves by Gaussian noise of std ``jitter * s`` per axis;
+* **hip bias**: hip keypoints (and mid_hip) move ``hip_bias * s`` towards the neck, as
+  human annotators and networks place hips higher than the joint centres;
+* **outliers**: with probability ``outlier_rate`` a keypoint is replaced by a point
+  uniformly within ``outlier_scale * s`` of the truth (score drawn from U(0.2, 0.6));
+* **swaps**: with probability ``swap_rate`` per frame one random left/right pair of the
+  layout swaps places (scores unchanged);
+* **missing**: with probability ``missing_rate`` a keypoint is missing, and keypoints
+  outside the image or behind the camera are always missing: reported as ``[0, 0, 0]``.
+Inlier scores are drawn from U(0.6, 1.0). The generator is seeded per (seed, frame).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from swarmpose.body.skeleton import LAYOUTS, KeypointLayout
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import DetectorError
+from swarmpose.detect.joints import Joints2D
+
+
+@dataclass(frozen=True)
+class SimulatedNoise:
+    """Noise parameters; fractions of the person's size in pixels, or probabilities."""
+
+    jitter: float = 0.01
+    hip_bias: float = 0.03
+    outlier_rate: float = 0.02
+    outlier_scale: float = 0.15
+    swap_rate: float = 0.01
+    missing_rate: float = 0.03
+
+    def as_dict(self) -> dict:
+        """The parameters, for writing next to a sequence."""
+        return asdict(self)
+
+
+HIP_POINTS = ("left_hip", "right_hip", "mid_hip")
+
+
+def person_size(points2d: np.ndarray) -> float:
+    """Larger side (px) of the box around finite projected points (N, 2)."""
+    ok = np.all(np.isfinite(points2d), axis=1)
+    if not np.any(ok):
+        return 0.0
+    return float(np.max(np.ptp(points2d[ok], axis=0)))
+
+
+def _lr_pairs(layout: KeypointLayout) -> list[tuple[int, int]]:
+    names = layout.keypoints
+    return [(i, names.index("right_" + n[5:])) for i, n in enumerate(names)
+            if n.startswith("left_") and "right_" + n[5:] in names]
+
+
+def simulate_detections(layout: KeypointLayout, points: dict[str, np.ndarray], depth_ok: dict[str, bool],
+                        size_px: float, intrinsics: Intrinsics, noise: SimulatedNoise, seed: int, frame: int
+                        ) -> dict[str, list[float]]:
+    """One frame of detections: keypoint name -> [x, y, score] (pixels; score 0 = missing).
+
+    points: body point name -> true pixel position (2,); depth_ok: point -> in front of
+    the camera; size_px: the person's size in pixels (see :func:`person_size`).
+    """
+    rng = np.random.default_rng([seed, frame])
+    n = len(layout.keypoints)
+    xy = np.zeros((n, 2))
+    present = np.zeros(n, dtype=bool)
+    neck = points.get("neck")
+    for i, point in enumerate(layout.points):
+        if point is None or point not in points:
+            continue
+        xy[i] = points[point]
+        present[i] = depth_ok.get(point, True)
+        if point in HIP_POINTS and neck is not None:
+            d = neck - xy[i]
+            xy[i] += noise.hip_bias * size_px * d / max(np.linalg.norm(d), 1e-9)
+    # Draw every random number for every keypoint, so one keypoint's fate never shifts another's.
+    jitter = rng.standard_normal((n, 2)) * noise.jitter * size_px
+    is_outlier = rng.random(n) < noise.outlier_rate
+    outlier_offset = (rng.random((n, 2)) * 2 - 1) * noise.outlier_scale * size_px
+    is_missing = rng.random(n) < noise.missing_rate
+    score = np.where(is_outlier, rng.uniform(0.2, 0.6, n), rng.uniform(0.6, 1.0, n))
+    swap_draw, swap_pick = rng.random(), rng.random()
+    xy = np.where(is_outlier[:, None], xy + outlier_offset, xy + jitter)
+    pairs = _lr_pairs(layout)
+    if pairs and swap_draw < noise.swap_rate:
+        a, b = pairs[int(swap_pick * len(pairs))]
+        xy[[a, b]] = xy[[b, a]]
+        present[[a, b]] = present[[b, a]]
+    inside = ((xy[:, 0] >= 0) & (xy[:, 0] <= intrinsics.width - 1)
+              & (xy[:, 1] >= 0) & (xy[:, 1] <= intrinsics.height - 1))
+    ok = present & ~is_missing & inside
+    return {name: ([float(xy[i, 0]), float(xy[i, 1]), float(score[i])] if ok[i] else [0.0, 0.0, 0.0])
+            for i, name in enumerate(layout.keypoints)}
+
+
+class SimulatedDetector:
+    """The detector ``simulated``: replays the detections ``swarmpose synth`` recorded in ``groundtruth.jsonl``.
+
+    ground_truth: the sequence's :class:`~swarmpose.sources.groundtruth.GroundTruth` (a folder
+    source's ``.ground_truth``). ``detect(frame)`` returns the keypoints (K, 3) x px, y px,
+    score that the noise model above produced for ``frame.index`` at synth time; ``box`` is ignored.
+    """
+
+    def __init__(self, ground_truth, source_name: str = "the source"):
+        if ground_truth is None:
+            raise DetectorError(f"--joints simulated needs a `swarmpose synth` sequence folder with groundtruth.jsonl "
+                                f"as --source; {source_name} has no ground truth. Use onnx:MODEL or "
+                                "openpose-json:DIR for other sources")
+        layouts = {d[0] for d in ground_truth.detections if d is not None}
+        if not layouts:
+            raise DetectorError(f"the ground truth of {source_name} records no simulated detections; "
+                                "re-run `swarmpose synth` to rewrite the sequence")
+        if len(layouts) > 1:
+            raise DetectorError(f"the ground truth of {source_name} mixes keypoint layouts {sorted(layouts)}")
+        self.ground_truth = ground_truth
+        self.layout = LAYOUTS[layouts.pop()]
+        self.name = "simulated"
+        self.source_name = source_name
+
+    def detect(self, frame, box: np.ndarray | None = None) -> Joints2D:
+        """The recorded detections of ``frame.index`` as :class:`~swarmpose.detect.joints.Joints2D`."""
+        try:
+            det = self.ground_truth.detections[self.ground_truth.row(int(frame.index))]
+        except KeyError:
+            raise DetectorError(f"simulated: {self.source_name} has no ground-truth record for frame "
+                                f"{frame.index}") from None
+        keypoints = np.zeros((len(self.layout.keypoints), 3)) if det is None else np.array(det[1], dtype=np.float64)
+        return Joints2D(self.layout, keypoints, int(frame.index), int(frame.timestamp_ns))
+
+    def close(self) -> None:
+        """Nothing to release."""

@@ -1,0 +1,93 @@
+"""Building the protocol's messages (``protocol/*.schema.json``) from plain values.
+
+* ``swarmpose.frame`` — one processed frame with every tracked body (:func:`frame_message`,
+  each body from :func:`body_message`);
+* ``swarmpose.status`` — the worker's health, about once a second (built by
+  :mod:`swarmpose.pipeline.status`);
+* ``swarmpose.info`` — what a worker tracks and how to read it (:func:`info_message`).
+
+Units: metres (camera frame, OpenCV axes), pixels, nanoseconds, milliseconds for
+durations, radians for angles. Nothing here knows the tracker: callers pass arrays.
+"""
+
+from __future__ import annotations
+
+import platform
+from collections.abc import Mapping
+from importlib import metadata
+
+import numpy as np
+
+from swarmpose import __version__
+from swarmpose.body.skeleton import ANGLE_LIMITS, ANGLE_NAMES, EVAL_JOINTS, EVAL_LINKS
+from swarmpose.messages.schema import MESSAGE_VERSIONS, PROTOCOL_VERSION, keys
+
+POSE_NAMES: tuple[str, ...] = ("tx", "ty", "tz", "qw", "qx", "qy", "qz") + ANGLE_NAMES
+"""Names of the 36 entries of the pose vector h."""
+
+
+def json_vector(v: np.ndarray, digits: int) -> list[float] | None:
+    """A vector as a JSON list rounded to ``digits`` decimals, or None when any entry is not finite."""
+    return [round(float(x), digits) for x in v] if np.all(np.isfinite(v)) else None
+
+
+def body_message(body_id: int, state: str, reason: str, pose: np.ndarray | None, joints3d: np.ndarray,
+                 joints2d: np.ndarray, confidence: np.ndarray, objective: Mapping[str, float],
+                 detection: dict | None = None) -> dict:
+    """One body of a frame message.
+
+    pose: (36,) or None; joints3d: (14, 3) m and joints2d: (14, 2) px in ``EVAL_JOINTS``
+    order (NaN rows where unknown); confidence: (14,) 0..1; objective: E and its terms;
+    detection: ``{"layout", "keypoints": {name: [x, y, score]}}`` the body was fitted to.
+    """
+    joints = {name: {"position_m": json_vector(p3, 6), "pixel": json_vector(p2, 2),
+                     "confidence": round(float(np.clip(c, 0.0, 1.0)), 3)}
+              for name, p3, p2, c in zip(EVAL_JOINTS, joints3d, joints2d, confidence)}
+    message = {"id": int(body_id), "state": state, "reason": reason,
+               "pose": None if pose is None else [round(float(x), 6) for x in pose],
+               "joints": joints,
+               "objective": {k: round(float(v), 4) for k, v in objective.items() if np.isfinite(v)}}
+    if detection is not None:
+        message["detection"] = detection
+    return message
+
+
+def frame_message(camera: str, frame: int, capture_ns: int, received_ns: int, publish_ns: int,
+                  bodies: list[dict], reason: str = "", timings_ms: Mapping[str, float] | None = None) -> dict:
+    """A ``swarmpose.frame`` message (see ``protocol/frame.schema.json``)."""
+    message = {"schema": "swarmpose.frame", "version": MESSAGE_VERSIONS["frame"], "camera": camera, "frame": int(frame),
+               "capture_ns": int(capture_ns), "received_ns": int(received_ns), "publish_ns": int(publish_ns),
+               "latency_ms": round(max(publish_ns - received_ns, 0) / 1e6, 3), "reason": reason, "bodies": bodies}
+    if timings_ms:
+        message["timings_ms"] = {k: round(float(v), 2) for k, v in timings_ms.items()}
+    return message
+
+
+def versions() -> dict[str, str]:
+    """Versions of swarmpose, the protocol, zenoh and Python."""
+    try:
+        zenoh_version = metadata.version("eclipse-zenoh")
+    except metadata.PackageNotFoundError:
+        zenoh_version = "not installed"
+    return {"swarmpose": __version__, "protocol": str(PROTOCOL_VERSION), "zenoh": zenoh_version,
+            "python": platform.python_version()}
+
+
+def info_message(camera: str, *, intrinsics=None, body=None, body_spec: str = "", source: str = "",
+                 detector: str = "", mode: str = "hybrid", opencl_device: str = "") -> dict:
+    """A ``swarmpose.info`` message. intrinsics: :class:`~swarmpose.core.camera.Intrinsics` or None
+    (no frame yet); body: the tracking :class:`~swarmpose.body.skinned.SkinnedBody`."""
+    intr = None if intrinsics is None else {
+        "width": int(intrinsics.width), "height": int(intrinsics.height), "fx": float(intrinsics.fx),
+        "fy": float(intrinsics.fy), "cx": float(intrinsics.cx), "cy": float(intrinsics.cy)}
+    body_info = {"spec": body_spec, "name": getattr(body, "name", ""),
+                 "height_m": round(float(body.height), 4) if body is not None else 0.0,
+                 "bones": len(body.bone_names) if body is not None else 0,
+                 "triangles": len(body.triangles) if body is not None else 0}
+    limits = {n: [float(lo), float(hi)] for n, (lo, hi) in zip(ANGLE_NAMES, ANGLE_LIMITS)}
+    return {"schema": "swarmpose.info", "version": MESSAGE_VERSIONS["info"], "camera": camera, "keys": keys(camera),
+            "skeleton": {"joints": list(EVAL_JOINTS), "links": [list(link) for link in EVAL_LINKS], "units": "m",
+                         "frame": "camera (OpenCV: x right, y down, z forward)"},
+            "pose_vector": {"names": list(POSE_NAMES), "limits_rad": limits},
+            "intrinsics": intr, "body": body_info, "source": source, "detector": detector, "mode": mode,
+            "opencl_device": opencl_device, "versions": versions()}

@@ -1,0 +1,15 @@
+"""Messages as one human-readable line (for logs and the subscriber's output)."""
+
+from __future__ import annotations
+
+
+def format_status(message: dict) -> str:
+    """One log line of a ``swarmpose.status`` message."""
+    f, lat = message["frames"], message["latency_ms"]
+    latency = "n/a" if lat["median"] is None else f"{lat['median']:.0f} ms (p95 {lat['p95']:.0f})"
+    line = (f"[{message['camera']}] {message['state']}: {message['fps']:.2f} fps, latency {latency}, "
+            f"frames {f['published']}/{f['received']} published (dropped {f['dropped']}, skipped {f['skipped']}, "
+            f"failed {f['failed']}), source {message['source']['state']}, tracker {message['tracker']['state']}")
+    if message["zenoh"]["warning"]:
+        line += f"; zenoh: {message['zenoh']['warning']}"
+    return line

@@ -1,0 +1,82 @@
+"""The wire side of the protocol: key expressions, JSON Schemas, validation, encoding.
+
+Every message is a JSON object with ``schema`` (``swarmpose.frame``, ``swarmpose.status``
+or ``swarmpose.info``) and ``version``; ``protocol/*.schema.json`` (shipped as the
+``swarmpose.protocol`` package data) define them.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import re
+from importlib import resources
+
+import jsonschema
+
+from swarmpose.core.errors import ConfigError, ProtocolError
+
+PROTOCOL_VERSION = 2
+"""The protocol as a whole; raised whenever one message's version is."""
+MESSAGE_VERSIONS = {"frame": 2, "status": 1, "info": 1}
+"""Each message's own version: frame 2 added the optional per-body ``detection``."""
+SCHEMAS = ("frame", "status", "info")
+CAMERA_ID = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
+
+
+def check_camera_id(camera: str) -> str:
+    """``camera`` if it can be one chunk of a zenoh key expression, else a ConfigError."""
+    if not isinstance(camera, str) or not CAMERA_ID.match(camera):
+        raise ConfigError(f"camera id {camera!r} must be 1-64 letters, digits, '_', '-' or '.' "
+                          "(it becomes part of the zenoh key swarmpose/<camera>/...); e.g. --camera-id kinect0")
+    return camera
+
+
+def keys(camera: str) -> dict[str, str]:
+    """The zenoh key expressions of camera ``camera`` (``*`` for every camera)."""
+    return {kind: f"swarmpose/{camera}/{kind}" for kind in ("frame", "status", "alive", "info")}
+
+
+@functools.cache
+def schema(name: str) -> dict:
+    """The JSON Schema of message ``name`` (frame, status or info)."""
+    if name not in SCHEMAS:
+        raise ConfigError(f"no schema {name!r}; the protocol has {SCHEMAS}")
+    return json.loads(resources.files("swarmpose.protocol").joinpath(f"{name}.schema.json").read_text("utf-8"))
+
+
+@functools.cache
+def _validator(name: str) -> jsonschema.Draft202012Validator:
+    return jsonschema.Draft202012Validator(schema(name))
+
+
+def validate(message: dict) -> dict:
+    """``message`` if it matches the schema its ``schema`` field names, else a ProtocolError
+    saying which field is wrong."""
+    name = message.get("schema", "") if isinstance(message, dict) else ""
+    kind = name.removeprefix("swarmpose.")
+    if kind not in SCHEMAS:
+        raise ProtocolError(f"not a swarmpose message: schema {name!r} (expected swarmpose.frame/status/info)")
+    errors = sorted(_validator(kind).iter_errors(message), key=lambda e: list(e.absolute_path))
+    if errors:
+        first = errors[0]
+        where = "/".join(str(p) for p in first.absolute_path) or "(top level)"
+        raise ProtocolError(f"{name} message invalid at {where}: {first.message}"
+                            + (f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""))
+    return message
+
+
+def decode(payload: bytes | str) -> dict:
+    """Parse one JSON message; a ProtocolError names what is wrong with it."""
+    try:
+        message = json.loads(payload)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise ProtocolError(f"message is not JSON: {exc}") from exc
+    if not isinstance(message, dict):
+        raise ProtocolError(f"message is a JSON {type(message).__name__}, expected an object")
+    return message
+
+
+def encode(message: dict) -> bytes:
+    """Compact UTF-8 JSON (NaN is not JSON: numbers must be finite, unknowns null)."""
+    return json.dumps(message, allow_nan=False, separators=(",", ":")).encode("utf-8")

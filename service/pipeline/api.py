@@ -1,0 +1,127 @@
+"""The public Python API: :class:`Tracker` for frames from your own code, :func:`track` for
+any source URI. Both run the same per-frame step as the command line.
+
+    import swarmpose
+    K = swarmpose.Intrinsics(640, 480, 525.0, 525.0, 319.5, 239.5)
+    with swarmpose.Tracker(body="builtin", detector="onnx:movenet.onnx", intrinsics=K) as tracker:
+        result = tracker.track(depth_m, rgb, timestamp_ns=t_ns)
+        for body in result.bodies:
+            print(body.id, body.state, body.joints["left_wrist"].position_m)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+
+from swarmpose.body.loader import load_body
+from swarmpose.body.skinned import SkinnedBody
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import ConfigError, ShapeError
+from swarmpose.core.settings import with_settings
+from swarmpose.detect.joints import Detector
+from swarmpose.detect.registry import make_detector
+from swarmpose.pipeline.run import results
+from swarmpose.pipeline.step import FramePipeline
+from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
+from swarmpose.sources.registry import open_source
+from swarmpose.tracking.body_tracker import BodyTracker
+from swarmpose.tracking.config import TrackerConfig
+from swarmpose.tracking.result import FrameResult
+
+
+class Tracker:
+    """Tracks the people in a stream of RGBD frames.
+
+    body: ``"builtin"``, ``"makehuman:DIR"``, a ``.glb``/``.gltf`` path, or a loaded
+    :class:`~swarmpose.body.skinned.SkinnedBody`; shape: the body's shape preset or
+    measurements (spec strings only). detector: a spec (``"onnx:MODEL.onnx"``,
+    ``"openpose-json:DIR"``, ``"simulated"``) or an object with ``detect(frame, box)``;
+    a detector made from a spec is the tracker's and closed with it. intrinsics: the
+    camera (needed by :meth:`track`; :meth:`track_frame` takes each frame's own). source:
+    the frame source, for the ``simulated`` detector (it replays the source's recorded
+    detections). config: a :class:`~swarmpose.tracking.config.TrackerConfig`; settings:
+    any of its fields by name (``particles=32``, ``mode="joints"``), over ``config``.
+
+    The tracker feeds each frame's tracked joints back to the detector (where to look next)
+    and restarts a track that fails. Use it as a context manager, or call :meth:`close`.
+    """
+
+    def __init__(self, body: str | SkinnedBody = "builtin", detector: str | Detector = "simulated",
+                 intrinsics: Intrinsics | None = None, *, shape: str | None = None,
+                 source: FrameSource | None = None, config: TrackerConfig | None = None, **settings: Any):
+        self.config = with_settings(config or TrackerConfig(), **settings)
+        if isinstance(body, SkinnedBody):
+            if shape:
+                raise ConfigError("shape applies to a body spec string; a loaded body already has its shape")
+            loaded = body
+        else:
+            loaded = load_body(body, shape or None)
+        triangles = self.config.triangles
+        self.body = loaded if len(loaded.triangles) <= triangles else loaded.tracking_lod(triangles)
+        self._owns_detector = isinstance(detector, str)
+        self.detector: Detector = make_detector(detector, source) if isinstance(detector, str) else detector
+        self.intrinsics = intrinsics
+        self.pipeline = FramePipeline(self.detector, lambda intr: BodyTracker(self.body, intr, self.config))
+        self._next_index = 0
+        self._closed = False
+
+    def track(self, depth_m: np.ndarray, rgb: np.ndarray | None = None, timestamp_ns: int = 0,
+              index: int | None = None) -> FrameResult:
+        """Track one frame. depth_m: (H, W) float metres, 0 (or NaN) = no measurement; rgb: (H, W, 3)
+        uint8 RGB registered to the depth, or None (a detector that needs colour then finds
+        nobody); timestamp_ns: capture time; index: frame number (default: counts from 0)."""
+        if self.intrinsics is None:
+            raise ConfigError("Tracker.track needs the camera: pass intrinsics=swarmpose.Intrinsics(width, height, "
+                              "fx, fy, cx, cy) to Tracker, or call track_frame with frames that carry theirs")
+        depth = np.asarray(depth_m, dtype=np.float32)
+        size = (self.intrinsics.height, self.intrinsics.width)
+        if depth.shape != size:
+            raise ShapeError(f"depth_m has shape {depth.shape}, expected {size} (the intrinsics' height, width)")
+        if rgb is not None:
+            rgb = np.asarray(rgb)
+            if rgb.shape != (*size, 3) or rgb.dtype != np.uint8:
+                raise ShapeError(f"rgb has shape {rgb.shape} and dtype {rgb.dtype}, expected {(*size, 3)} uint8 "
+                                 "(RGB registered to the depth)")
+        i = self._next_index if index is None else int(index)
+        return self.track_frame(Frame(i, int(timestamp_ns), depth, rgb, self.intrinsics))
+
+    def track_frame(self, frame: Frame | SkippedFrame) -> FrameResult:
+        """Track one frame of a source (a skipped frame gives a result that says why)."""
+        if self._closed:
+            raise ConfigError("this Tracker is closed; make a new one")
+        self._next_index = frame.index + 1
+        return self.pipeline.process(frame)
+
+    def reset(self) -> None:
+        """Forget the tracks: the next frame starts from its detections."""
+        self.pipeline.reset()
+
+    def close(self) -> None:
+        """Release the detector (when the tracker made it)."""
+        if not self._closed and self._owns_detector:
+            self.detector.close()
+        self._closed = True
+
+    def __enter__(self) -> Tracker:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def track(source: str | FrameSource, *, body: str | SkinnedBody = "builtin", detector: str | Detector = "simulated",
+          shape: str | None = None, frames: int = 0, **settings: Any) -> Iterator[FrameResult]:
+    """Track every frame of ``source`` (a URI such as ``"folder:DIR"``, ``"mkv:FILE"``,
+    ``"realsense:"``, or an open source), yielding a :class:`FrameResult` per frame; at most
+    ``frames`` (0 = all). Other arguments as for :class:`Tracker`. The source (when opened
+    here) and the detector are closed when the iteration ends or is abandoned."""
+    opened = open_source(source) if isinstance(source, str) else source
+    try:
+        with Tracker(body, detector, shape=shape, source=opened, **settings) as tracker:
+            yield from results(opened, tracker.pipeline, frames)
+    finally:
+        if isinstance(source, str):
+            opened.close()

@@ -1,0 +1,72 @@
+"""What a run of swarmpose does: :class:`ServiceConfig`, with the tracker's settings nested.
+
+One declaration (see :mod:`swarmpose.core.settings`) gives every command its flags, the
+TOML file its keys and the environment its ``SWARMPOSE_*`` variables
+(:mod:`swarmpose.cli.settings` loads them in layers). Leaf names are unique, so a setting
+is spelt the same everywhere: ``particles`` is ``--particles``, ``SWARMPOSE_PARTICLES``
+and ``particles = 64`` (top level or in a ``[tracker]`` table).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from swarmpose.core.errors import ConfigError
+from swarmpose.core.settings import check_settings, section, setting
+from swarmpose.messages.schema import check_camera_id
+from swarmpose.tracking.config import TrackerConfig
+
+ZENOH_MODES = ("peer", "client", "off")
+SOURCE_FORMS = ("folder:DIR, rgbd:C.png,D.png,K.json, mkv:FILE, bag:FILE, openni2:[FILE.oni|URI], "
+                "realsense:[SERIAL], azure:[INDEX], or a bare folder / recording file")
+
+
+@dataclass(frozen=True)
+class ZenohConfig:
+    """How results are published over zenoh."""
+
+    zenoh_mode: str = setting("peer", "zenoh: peer, client (through a router) or off (no publishing)",
+                              choices=ZENOH_MODES)
+    connect: tuple[str, ...] = setting((), "zenoh endpoints to connect to, e.g. tcp/192.168.1.10:7447")
+    listen: tuple[str, ...] = setting((), "zenoh endpoints to listen on, e.g. tcp/0.0.0.0:7447")
+    multicast: bool = setting(True, "zenoh multicast scouting (automatic discovery of peers on the LAN)")
+    zenoh_config: str = setting("", "a zenoh JSON5 configuration file, applied before the other zenoh settings")
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+
+
+@dataclass(frozen=True)
+class ServiceConfig:
+    """Everything ``track``, ``eval``, ``replay`` and ``serve`` run with (and the Python API's
+    :class:`swarmpose.Tracker`, for the settings it shares)."""
+
+    source: str = setting("", f"frame source: {SOURCE_FORMS}")
+    detector: str = setting("simulated", "2D joints: simulated | onnx:MODEL.onnx[?adapter=...] | "
+                                         "openpose-json:DIR[?layout=...]", aliases=("joints",))
+    body: str = setting("builtin", "body model: builtin, makehuman:DIR or a .glb/.gltf file")
+    shape: str = setting("", "body shape: a preset (male, female, male-heavy, ...) or height=1.8,torso=1.1,... "
+                             "(empty: the body's default)")
+    tracker: TrackerConfig = section(TrackerConfig, "the tracker")
+    camera_id: str = setting("camera0", "the <camera> of the zenoh keys swarmpose/<camera>/... and of every message")
+    frames: int = setting(0, "stop after this many frames (0 = all)", minimum=0, aliases=("max_frames",))
+    overlay: bool = setting(True, "write overlay.mp4 (the skeleton over the colour video) with the other files")
+    zenoh: ZenohConfig = section(ZenohConfig, "zenoh publishing")
+    rate: float = setting(0.0, "deliver a recording at this many frames/s (0: as recorded for serve, as fast as "
+                               "possible otherwise; live cameras set their own rate)", minimum=0.0)
+    loop: bool = setting(False, "start a recording over when it ends (serve)")
+    record: str = setting("", "serve: also write poses.jsonl/csv/bvh and overlay.mp4 into this folder")
+    status_period_s: float = setting(1.0, "seconds between status messages", minimum=0.01)
+    health_file: str = setting("", "also write each status message here (for `swarmpose health`)")
+    reopen_s: float = setting(5.0, "seconds between attempts to reopen a failed live source or zenoh router",
+                              minimum=0.0)
+
+    def __post_init__(self) -> None:
+        check_camera_id(self.camera_id)
+        check_settings(self)
+
+    def require_source(self) -> ServiceConfig:
+        """Self, or a ConfigError when no source is configured."""
+        if not self.source:
+            raise ConfigError(f"no source: pass --source URI ({SOURCE_FORMS}) or set SWARMPOSE_SOURCE")
+        return self

@@ -1,0 +1,95 @@
+"""The sequential run: every frame of a source through the per-frame step, in one thread.
+
+``swarmpose track`` and ``eval``, and :func:`swarmpose.track`, use it. Each frame's
+result goes, as the protocol's frame message, to every sink (files, scoring, ...) before
+the next frame is read, so an interrupted run keeps everything it produced. A sink that
+fails is logged and dropped; the others go on.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+
+from swarmpose.core.progress import progress_bar
+from swarmpose.pipeline.step import FramePipeline, describe_error
+from swarmpose.publish.sink import Sink
+from swarmpose.sources.base import Frame, SkippedFrame
+from swarmpose.tracking.result import FrameResult
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class RunSummary:
+    """What a run went through: frames, counts per state (init / tracking / lost / skipped),
+    the wall time (s) of detection + tracking, and the errors of sinks that failed."""
+
+    frames: int = 0
+    states: dict[str, int] = field(default_factory=dict)
+    seconds: float = 0.0
+    sink_errors: list[str] = field(default_factory=list)
+
+    @property
+    def fps(self) -> float:
+        """Frames per second of detection + tracking (file reading excluded)."""
+        tracked = sum(v for k, v in self.states.items() if k != "skipped")
+        return tracked / self.seconds if self.seconds > 0 else 0.0
+
+    def count(self, result: FrameResult, seconds: float) -> None:
+        self.frames += 1
+        self.states[result.state] = self.states.get(result.state, 0) + 1
+        self.seconds += seconds
+
+
+def results(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline, frames: int = 0,
+            summary: RunSummary | None = None) -> Iterator[FrameResult]:
+    """The result of every item of ``source`` (at most ``frames``; 0 = all), counted in ``summary``."""
+    summary = summary if summary is not None else RunSummary()
+    for item in source:
+        if frames and summary.frames >= frames:
+            break
+        t0 = time.perf_counter()
+        result = pipeline.process(item)
+        summary.count(result, 0.0 if result.skipped else time.perf_counter() - t0)
+        yield result
+
+
+def run_sequence(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline, sinks: Sequence[Sink] = (), *,
+                 camera: str = "camera0", frames: int = 0, progress: bool = True) -> RunSummary:
+    """Track ``source`` frame by frame, handing each frame message to ``sinks``; closes the sinks."""
+    summary = RunSummary()
+    live = list(sinks)
+    total = frames or getattr(source, "length", None) or None
+    try:
+        with progress_bar("track", total, enabled=progress) as bar:
+            frames_of = {}
+            for result in results(_remember(source, frames_of), pipeline, frames, summary):
+                message = result.to_message(camera)
+                frame = frames_of.pop(result.index, None)
+                for sink in list(live):
+                    try:
+                        sink.frame(message, frame)
+                    except Exception as exc:  # one failing sink must not stop the run or the others
+                        what = f"{type(sink).__name__}: {describe_error(exc)}"
+                        log.error("%s; it gets no more frames", what)
+                        summary.sink_errors.append(what)
+                        live.remove(sink)
+                bar.update(1)
+    finally:
+        for sink in sinks:
+            try:
+                sink.close()
+            except Exception as exc:  # report, close the others
+                log.error("closing %s: %s", type(sink).__name__, describe_error(exc))
+    return summary
+
+
+def _remember(source: Iterable[Frame | SkippedFrame], frames_of: dict) -> Iterator[Frame | SkippedFrame]:
+    """Pass ``source`` through, keeping each Frame by index until its message is handed out."""
+    for item in source:
+        if isinstance(item, Frame):
+            frames_of[item.index] = item
+        yield item

@@ -1,0 +1,177 @@
+"""Assembling a run from its settings: body, source, detector, per-frame step and sinks.
+
+:func:`open_parts` gives what every command needs (:class:`Parts`); :func:`build_worker`
+adds zenoh, files, scoring and status sinks around a :class:`~.worker.Worker`
+(``serve``: live hand-overs, paced; ``replay``: every frame, as fast as it goes), and
+:func:`run_summary` reports what a run produced. Every opened part is closed by the
+caller's ``ExitStack``.
+"""
+
+from __future__ import annotations
+
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from swarmpose.body.loader import load_body
+from swarmpose.body.skinned import SkinnedBody
+from swarmpose.core.progress import progress_bar
+from swarmpose.detect.joints import Detector
+from swarmpose.detect.registry import make_detector
+from swarmpose.messages.build import info_message
+from swarmpose.pipeline.config import ServiceConfig
+from swarmpose.pipeline.status import HealthFileSink, LogSink, WorkerStats, latency_summary
+from swarmpose.pipeline.step import FramePipeline
+from swarmpose.pipeline.worker import Worker
+from swarmpose.publish.files import open_recording
+from swarmpose.publish.sink import Sink
+from swarmpose.publish.zenoh_link import ZenohSink
+from swarmpose.sim.scoring import ScoreSink
+from swarmpose.sources.base import Frame, FrameSource
+from swarmpose.sources.registry import open_source
+from swarmpose.tracking.body_tracker import BodyTracker
+
+
+@dataclass
+class Parts:
+    """What a run is made of: the settings, the tracking body, the open source, the
+    detector, the per-frame step, the sinks, the ground-truth scorer (None: no ground
+    truth) and the files it writes."""
+
+    config: ServiceConfig
+    body: SkinnedBody
+    source: FrameSource
+    detector: Detector
+    pipeline: FramePipeline
+    sinks: list[Sink] = field(default_factory=list)
+    score: ScoreSink | None = None
+    outputs: list[Path] = field(default_factory=list)
+
+    @property
+    def fps(self) -> float:
+        """The source's frame rate (30 when it does not say)."""
+        return float(getattr(self.source, "fps", 0.0) or 30.0)
+
+
+def make_pipeline(body: SkinnedBody, detector: Detector, config: ServiceConfig) -> FramePipeline:
+    """The per-frame step tracking ``body`` with ``detector`` under ``config.tracker``."""
+    return FramePipeline(detector, lambda intrinsics: BodyTracker(body, intrinsics, config.tracker))
+
+
+def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score: bool = True) -> Parts:
+    """Open the source, detector and body of ``config`` (closed by ``stack``); with ``out``,
+    the replay files there; with ``score`` and a source that has ground truth, a scorer."""
+    config.require_source()
+    body = load_body(config.body, config.shape or None)
+    source = open_source(config.source)
+    stack.callback(source.close)
+    detector = make_detector(config.detector, source)
+    stack.callback(detector.close)
+    triangles = config.tracker.triangles
+    tracking_body = body if len(body.triangles) <= triangles else body.tracking_lod(triangles)
+    parts = Parts(config, tracking_body, source, detector, make_pipeline(tracking_body, detector, config))
+    if out:
+        recording = open_recording(Path(out), tracking_body, fps=parts.fps, overlay=config.overlay)
+        for sink in recording:  # the run closes them; this covers a failure before it starts
+            stack.callback(sink.close)
+        parts.sinks.extend(recording)
+        parts.outputs = [Path(s.path) for s in recording]
+    ground_truth = getattr(source, "ground_truth", None)
+    if score and ground_truth is not None:
+        parts.score = ScoreSink(ground_truth)
+        parts.sinks.append(parts.score)
+    return parts
+
+
+class ProgressSink:
+    """Shows progress (frames published of the recording's length) on stderr."""
+
+    def __init__(self, label: str, total: int | None):
+        self.bar = progress_bar(label, total)
+
+    def frame(self, message: dict, frame: Frame | None) -> None:
+        self.bar.update(1)
+
+    def status(self, message: dict) -> None:
+        """Nothing to show per status."""
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: str = "",
+                 progress: bool = False) -> tuple[Worker, Parts, ZenohSink | None]:
+    """The worker of ``config`` with its sinks: zenoh (unless ``zenoh_mode`` is off), the replay
+    files (``out`` or ``record``), the ground-truth scorer, the log, the health file and (with
+    ``progress``) a progress bar. replay: no dropped frames, no pacing, no looping."""
+    parts = open_parts(config, stack, out=out or config.record)
+    worker: Worker | None = None
+
+    def info() -> dict:
+        return info_message(config.camera_id, intrinsics=parts.pipeline.intrinsics, body=parts.body,
+                            body_spec=config.body, source=config.source, detector=config.detector,
+                            mode=config.tracker.mode, opencl_device=parts.pipeline.device_name)
+
+    zenoh = None
+    z = config.zenoh
+    if z.zenoh_mode != "off":
+        zenoh = ZenohSink(config.camera_id, info, mode=z.zenoh_mode, connect=z.connect, listen=z.listen,
+                          multicast=z.multicast, config_file=z.zenoh_config, retry_s=config.reopen_s)
+        stack.callback(zenoh.close)
+    sinks: list[Sink] = ([zenoh] if zenoh else []) + parts.sinks + [LogSink()]
+    if config.health_file:
+        sinks.append(HealthFileSink(config.health_file))
+    total = config.frames or parts.source.length or None
+    if progress:
+        sinks.append(ProgressSink("replay", total))
+    if replay:
+        pace = config.rate or None
+    else:
+        pace = None if parts.source.live else (config.rate or parts.fps)
+    uri = config.source
+    worker = Worker(lambda: open_source(uri), parts.pipeline, sinks, camera=config.camera_id, drop_stale=not replay,
+                    pace_fps=pace, loop=config.loop and not replay, frames=config.frames,
+                    status_period_s=config.status_period_s, reopen_s=config.reopen_s, source_uri=uri,
+                    detector_spec=config.detector, zenoh_state=zenoh.state if zenoh else None, source=parts.source)
+    return worker, parts, zenoh
+
+
+def run_summary(parts: Parts, stats: WorkerStats, seconds: float, worker: Worker) -> dict:
+    """What a worker run produced: counts, fps, latency, Δ / A(t) (with ground truth), output files and sizes."""
+    result = {"frames": stats.published, "skipped": stats.skipped, "failed": stats.failed,
+              "fps": round(stats.published / seconds, 3) if seconds > 0 else 0.0,
+              "latency_ms": {k: None if v is None else round(v, 1)
+                             for k, v in latency_summary(stats.all_latencies).items()},
+              "outputs": {str(p): p.stat().st_size for p in parts.outputs if p.exists()},
+              "opencl_device": worker.opencl_device, "state": worker.state}
+    result.update(score_summary(parts))
+    return result
+
+
+def score_summary(parts: Parts) -> dict:
+    """``mpjpe_mm``, ``coverage`` and ``A`` (threshold mm as text -> share) when the run was scored."""
+    if parts.score is None or not parts.score.estimates:
+        return {}
+    summary = parts.score.summary()
+    return {"mpjpe_mm": summary["mpjpe_mm"], "coverage": summary["coverage"],
+            "A": {str(t): a for t, a in summary["A"].items()}, "per_joint_mm": summary["per_joint_mm"]}
+
+
+def format_summary(result: dict) -> str:
+    """Human-readable lines of :func:`run_summary`."""
+    lat = result["latency_ms"]
+    lines = [f"{result['frames']} frames ({result['skipped']} skipped, {result['failed']} failed) at "
+             f"{result['fps']:.2f} frames/s; latency median {lat['median']} ms, p95 {lat['p95']} ms"]
+    lines += format_accuracy(result)
+    for path, size in result["outputs"].items():
+        lines.append(f"  {path}  {size:,} bytes")
+    return "\n".join(lines)
+
+
+def format_accuracy(result: dict) -> list[str]:
+    """Δ and A(t) lines of a summary that has them."""
+    if "mpjpe_mm" not in result:
+        return []
+    delta = "n/a" if result["mpjpe_mm"] is None else f"{result['mpjpe_mm']:.1f} mm"
+    return [f"Δ = {delta}, A(100 mm) = {100 * result['A']['100']:.0f}%, coverage {result['coverage']:.0%}",
+            "A(t): " + "  ".join(f"{t}mm {100 * a:.0f}%" for t, a in result["A"].items())]

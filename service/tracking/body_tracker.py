@@ -1,0 +1,204 @@
+"""The hybrid tracker of one body: per frame, PSO over the 36-D pose of the paper's
+objective (§2.3–2.4).
+
+Per frame (:meth:`BodyTracker.step`):
+
+1. The detection's joints (score >= ``min_score``) are lifted to J^e on the depth.
+2. **Start**. With a previous solution (state *tracking*), particles start around it in a
+   region that contains J^e (:mod:`swarmpose.tracking.search`); the last 5 solutions and
+   the J^e torso pose are injected as particles. Without one (the first frame, or after the
+   track was lost: state *init*), the torso pose of J^e
+   (:func:`swarmpose.tracking.init_pose.torso_pose`) with the body's rest angles starts a
+   joints-only PSO over wide angle ranges (twice the generations), whose result is the
+   centre of the normal search. No manual initialisation.
+3. **Search**. PSO (canonical or perturbed) of ``E = w_D·E_D + w_J·E_J``.
+4. **Verdict** (:mod:`swarmpose.tracking.verdict`): lost or not, and per-joint confidence.
+   Frames with no usable joints and no previous solution, or with neither joints nor
+   depth, are *lost* with the reason; the next frame then starts from J^e again.
+
+Modes: ``hybrid`` (w_D = 3, w_J = 1), ``depth`` (w_J = 0; the joints only (re)initialise),
+``joints`` (w_D = 0) and ``lift`` (J^e as the answer, no model).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from swarmpose.body.skeleton import EVAL_JOINTS, ROOT_QUATERNION
+from swarmpose.body.skinned import SkinnedBody
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import TrackingError
+from swarmpose.detect.joints import Joints2D
+from swarmpose.gpu.context import ClContext
+from swarmpose.gpu.scorer import ParticleScorer
+from swarmpose.gpu.tile import box_around
+from swarmpose.sources.base import Frame
+from swarmpose.tracking import search, verdict
+from swarmpose.tracking.config import TrackerConfig
+from swarmpose.tracking.init_pose import torso_pose
+from swarmpose.tracking.lift import lift_eval_joints
+from swarmpose.tracking.objective import JointTargets, Objective
+from swarmpose.tracking.pso import minimise
+from swarmpose.tracking.result import BodyResult, lost_body
+
+HISTORY = 5
+"""Previous solutions injected as particles."""
+
+
+class BodyTracker:
+    """Tracks one person in a stream of frames with a body model (see the module docstring).
+
+    body: the (personalised) body; decimated to ``config.triangles`` for tracking.
+    intrinsics: the camera of every frame. context: the OpenCL device to score on (None:
+    the one ``config.device`` names).
+    """
+
+    def __init__(self, body: SkinnedBody, intrinsics: Intrinsics, config: TrackerConfig | None = None,
+                 context: ClContext | None = None, body_id: int = 0):
+        config = config or TrackerConfig()
+        self.config, self.intrinsics, self.body_id = config, intrinsics, body_id
+        self.body = body if len(body.triangles) <= config.triangles else body.tracking_lod(config.triangles)
+        self.weights = config.weights
+        self.objective: Objective | None = None
+        if config.mode != "lift":
+            context = context or ClContext.for_spec(config.device)
+            scorer = ParticleScorer(self.body, intrinsics, config.tile, threshold=config.threshold_m, context=context)
+            self.objective = Objective(self.body, intrinsics, scorer, self.weights)
+        self.history: list[np.ndarray] = []
+        self.previous: np.ndarray | None = None
+        self.lo, self.hi = search.pose_bounds()
+
+    @property
+    def device_name(self) -> str:
+        """``platform: device`` of the OpenCL device scoring, or "" (lift mode)."""
+        return "" if self.objective is None else self.objective.scorer.cl_context.name
+
+    def reset(self) -> None:
+        """Forget the track: the next frame initialises from its detection."""
+        self.history.clear()
+        self.previous = None
+
+    def _box(self, reference: np.ndarray | None, targets: JointTargets) -> tuple[float, float, float, float]:
+        pts = []
+        if reference is not None:
+            verts = self.body.pose(reference[None])[0]
+            verts = verts[verts[:, 2] > 0.05]
+            if len(verts):
+                pts.append(self.intrinsics.project(verts))
+        if targets.count:
+            xy = targets.xy
+            lo, hi = xy.min(axis=0), xy.max(axis=0)
+            grow = 0.2 * (hi - lo) + 10.0
+            pts.append(np.array([lo - grow, hi + grow]))
+        return box_around(np.concatenate(pts), margin=0.1)
+
+    # ------------------------------------------------------------------ per frame
+    def step(self, frame: Frame, joints: Joints2D | None) -> BodyResult:
+        """Track one frame with its detection (None: no detector output for it)."""
+        t0 = time.perf_counter()
+        depth = np.asarray(frame.depth, dtype=np.float32)
+        if depth.shape != (self.intrinsics.height, self.intrinsics.width):
+            raise TrackingError(f"frame {frame.index}: depth is {depth.shape[1]}x{depth.shape[0]}, the tracker's "
+                                f"camera is {self.intrinsics.width}x{self.intrinsics.height}; use one intrinsics "
+                                "file for the whole sequence")
+        depth = np.where(np.isfinite(depth) & (depth > 0), depth, np.float32(0.0))
+        if self.config.mode == "lift":
+            return self._lift(depth, joints, t0)
+        targets = JointTargets.from_detection(joints, depth, self.intrinsics, self.body, self.config.min_score)
+        has_depth = bool(np.any(depth > 0))
+        lifted = {n: p for n, p in zip(targets.names, targets.xyz)}
+        state = "tracking" if self.previous is not None else "init"
+        if self.previous is None:
+            centre = torso_pose(self.body, lifted, self.body.rest_angles)
+            if centre is None:
+                return self._lost("no person: fewer than 3 of the hips and shoulders detected with depth", t0)
+        if not has_depth and targets.count == 0:
+            return self._lost("no joints detected and no valid depth", t0)
+
+        rng = np.random.default_rng([self.config.seed, frame.index])
+        pso = self.config.pso_config
+        timings: dict[str, float] = {}
+        if state == "init":
+            centre = self._initialise(centre, targets, rng, timings)
+            seeds = [centre]
+            start = search.spread(centre, pso.particles, rng, np.full(3, 0.04), 0.1, 0.15)
+        else:
+            centre = self.previous
+            torso = torso_pose(self.body, lifted, centre[7:])
+            offset = np.abs(torso[:3] - centre[:3]) if torso is not None else np.zeros(3)
+            radius = search.angle_radius(self.body, self.intrinsics, centre, targets)
+            start = search.spread(centre, pso.particles, rng, 0.04 + offset, 0.15, radius)
+            seeds = [centre] + self.history[-HISTORY:][::-1] + ([torso] if torso is not None else [])
+        for i, s in enumerate(seeds[:pso.particles]):
+            start[i] = s
+
+        t1 = time.perf_counter()
+        self.objective.set_frame(depth, self._box(centre, targets), targets, centre)
+        result = minimise(self.objective, start, self.lo, self.hi, rng, pso, search.renormalise, search.perturb)
+        timings["pso"] = 1000 * (time.perf_counter() - t1)
+        best = result.best
+        self.objective(best[None])
+        parts = {k: float(v[0]) for k, v in self.objective.last_parts.items()}
+        if self.config.smoothing > 0 and self.previous is not None and state == "tracking":
+            best = self._smooth(best)
+        tile, counts = self._render(best)
+        out_state, reason = verdict.judge(self.objective, counts, targets, parts, state,
+                                          self.config.lost_joint_error, self.config.lost_depth_agreement)
+        if out_state == "lost":
+            self.reset()
+        else:
+            self.previous = best
+            self.history.append(best)
+            del self.history[:-HISTORY]
+        joints3d = self.body.posed_points(best[None], EVAL_JOINTS)[0]
+        joints2d = self.intrinsics.project(joints3d)
+        conf = verdict.confidence(self.objective, tile, joints2d, joints, targets, self.config.min_score)
+        timings["total"] = 1000 * (time.perf_counter() - t0)
+        return BodyResult(self.body_id, out_state, reason, best, joints3d, joints2d, conf, parts, timings, joints)
+
+    def _lift(self, depth: np.ndarray, joints: Joints2D | None, t0: float) -> BodyResult:
+        j3 = lift_eval_joints(depth, self.intrinsics, joints, self.config.min_score)
+        ok = np.all(np.isfinite(j3), axis=1)
+        j2 = self.intrinsics.project(np.where(np.isfinite(j3), j3, 1.0))
+        j2[~ok] = np.nan
+        state, reason = ("tracking", "") if ok.any() else ("lost", "no joints detected with depth")
+        return BodyResult(self.body_id, state, reason, None, j3, j2, ok.astype(float), {},
+                          {"total": 1000 * (time.perf_counter() - t0)}, joints)
+
+    def _lost(self, reason: str, t0: float) -> BodyResult:
+        self.reset()
+        return lost_body(reason, self.body_id, {"total": 1000 * (time.perf_counter() - t0)})
+
+    def _initialise(self, centre: np.ndarray, targets: JointTargets, rng: np.random.Generator,
+                    timings: dict[str, float]) -> np.ndarray:
+        """Joints-only PSO over wide angle ranges from the J^e torso pose; returns the centre for the frame."""
+        if targets.count == 0:
+            return centre
+        t = time.perf_counter()
+        joints_only = Objective(self.body, self.intrinsics, self.objective.scorer,
+                                replace(self.weights, depth=0.0, joints=1.0))
+        joints_only.targets = targets
+        pso = replace(self.config.pso_config, generations=2 * self.config.generations, variant="perturbed")
+        start = search.spread(centre, pso.particles, rng, np.full(3, 0.08), 0.3, 1.0)
+        start[0] = centre
+        result = minimise(joints_only, start, self.lo, self.hi, rng, pso, search.renormalise, search.perturb)
+        timings["init"] = 1000 * (time.perf_counter() - t)
+        return result.best
+
+    def _smooth(self, best: np.ndarray) -> np.ndarray:
+        a = self.config.smoothing
+        out = (1 - a) * best + a * self.previous
+        out[ROOT_QUATERNION] /= np.linalg.norm(out[ROOT_QUATERNION])
+        return out
+
+    def _render(self, best: np.ndarray) -> tuple[np.ndarray | None, dict[str, np.ndarray] | None]:
+        """The best pose's depth tile (TH, TW) m and its counts, once per frame; (None, None)
+        when the frame's box holds no observed depth."""
+        observed = self.objective.scorer.observed
+        if observed is None or not np.any(observed > 0):
+            return None, None
+        tiles, _, counts = self.objective.scorer.render_and_score(best[None])
+        return tiles[0], counts

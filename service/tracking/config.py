@@ -1,0 +1,57 @@
+"""What changes how a frame is tracked: :class:`TrackerConfig`, one declaration for the API,
+every command's flags, the TOML file and ``SWARMPOSE_*`` (see :mod:`swarmpose.core.settings`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from swarmpose.core.settings import check_settings, setting
+from swarmpose.tracking.objective import ObjectiveWeights
+from swarmpose.tracking.pso import VARIANTS, PsoConfig
+
+MODES = ("hybrid", "depth", "joints", "lift")
+MODE_WEIGHTS = {"hybrid": (3.0, 1.0), "depth": (1.0, 0.0), "joints": (0.0, 1.0)}
+"""(w_D, w_J) of each mode; ``lift`` fits no model."""
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """The tracker's settings (paper §2.3-2.4 where it names them)."""
+
+    mode: str = setting("hybrid", "objective: hybrid (w_D=3, w_J=1), depth (w_J=0; joints only (re)start), "
+                                  "joints (w_D=0), lift (J^e as the answer, no model)", choices=MODES)
+    particles: int = setting(64, "PSO particles per generation", minimum=1)
+    generations: int = setting(64, "PSO generations per frame", minimum=1)
+    pso: str = setting("perturbed", "PSO variant", choices=VARIANTS)
+    depth_weight: float | None = setting(None, "w_D (auto: the mode's)", kind="float?", minimum=0)
+    joints_weight: float | None = setting(None, "w_J (auto: the mode's)", kind="float?", minimum=0)
+    tile: tuple[int, int] = setting((64, 64), "depth tile WxH pixels over the person's box", kind="size")
+    triangles: int = setting(1500, "tracking level of detail of the body mesh, triangles", minimum=100)
+    seed: int = setting(0, "PSO seed (a run repeats exactly with the same seed)", minimum=0)
+    smoothing: float = setting(0.0, "blend each pose with the previous one, 0..1 (0 = off, as in evaluation)",
+                               minimum=0.0, maximum=0.99)
+    device: str = setting("", "OpenCL device: cpu, gpu, PLATFORM:DEVICE or part of its name (empty: a GPU, "
+                              "else PoCL)", aliases=("cl_device",))
+    alpha: float = setting(0.97, "share of the 2D term in E_J (the rest is the 3D term)", minimum=0.0, maximum=1.0)
+    threshold_m: float = setting(0.30, "T: depth differences are clipped at this many metres", minimum=0.01)
+    min_score: float = setting(0.3, "detected keypoints below this score are ignored", minimum=0.0, maximum=1.0)
+    lost_joint_error: float = setting(0.12, "lost when the 2D joints are off by more than this share of the "
+                                            "person's size", minimum=0.0)
+    lost_depth_agreement: float = setting(0.4, "lost when fewer than this share of the model's pixels agree with "
+                                               "the depth", minimum=0.0, maximum=1.0)
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+
+    @property
+    def pso_config(self) -> PsoConfig:
+        """The swarm's size, budget and variant."""
+        return PsoConfig(particles=self.particles, generations=self.generations, variant=self.pso)
+
+    @property
+    def weights(self) -> ObjectiveWeights:
+        """w_D, w_J (the mode's unless given), alpha, T and the score threshold."""
+        w_d, w_j = MODE_WEIGHTS.get(self.mode, (0.0, 1.0))
+        return ObjectiveWeights(depth=w_d if self.depth_weight is None else self.depth_weight,
+                                joints=w_j if self.joints_weight is None else self.joints_weight,
+                                alpha=self.alpha, threshold_m=self.threshold_m, min_score=self.min_score)

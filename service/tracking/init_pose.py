@@ -1,0 +1,56 @@
+"""A body pose from lifted 3D joints alone: the torso frame of J^e (no manual initialisation).
+
+The root orientation comes from the hips and shoulders: the body's left axis from the
+right to the left hip and shoulder, its up axis from the mid-hip to the mid-shoulder,
+orthonormalised (Gram–Schmidt, left first). The root position puts the body's own
+mid-hip (at its rest angles) on the lifted mid-hip. The joint angles are the caller's
+(the previous solution's, or the body's rest angles).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from swarmpose.body.kinematics import matrix_to_quaternion
+from swarmpose.body.skinned import SkinnedBody
+
+TORSO = ("left_hip", "right_hip", "left_shoulder", "right_shoulder")
+
+
+def _mid(points: dict[str, np.ndarray], a: str, b: str) -> np.ndarray | None:
+    pa, pb = points.get(a), points.get(b)
+    if pa is not None and pb is not None:
+        return (pa + pb) / 2.0
+    return pa if pa is not None else pb
+
+
+def torso_pose(body: SkinnedBody, lifted: dict[str, np.ndarray], angles: np.ndarray) -> np.ndarray | None:
+    """A (36,) pose whose torso matches lifted joints {name: (3,) m}, or None when fewer than
+    three of the four torso joints (hips, shoulders) have a finite lift. angles: (29,) rad."""
+    pts = {k: np.asarray(v, float) for k, v in lifted.items() if k in TORSO and np.all(np.isfinite(v))}
+    if len(pts) < 3:
+        return None
+    lefts = [pts[f"left_{j}"] - pts[f"right_{j}"] for j in ("hip", "shoulder")
+             if f"left_{j}" in pts and f"right_{j}" in pts]
+    hip, shoulder = _mid(pts, "left_hip", "right_hip"), _mid(pts, "left_shoulder", "right_shoulder")
+    if not lefts or hip is None or shoulder is None:
+        return None
+    left = np.sum([v / max(np.linalg.norm(v), 1e-9) for v in lefts], axis=0)
+    up = shoulder - hip
+    if np.linalg.norm(left) < 1e-6 or np.linalg.norm(up) < 1e-6:
+        return None
+    x = left / np.linalg.norm(left)
+    y = up - (up @ x) * x
+    if np.linalg.norm(y) < 1e-6:
+        return None
+    y /= np.linalg.norm(y)
+    rotation = np.stack([x, y, np.cross(x, y)], axis=1)  # body axes as camera-frame columns
+    q = matrix_to_quaternion(rotation)
+    body_mid_hip = (body.point("left_hip") + body.point("right_hip")) / 2.0
+    root = body.bone_heads[0]
+    translation = hip - rotation @ (body_mid_hip - root)
+    h = np.concatenate([translation, q, np.asarray(angles, float)])
+    # The rest angles move the hips a little relative to the root; correct with one FK pass.
+    posed_mid = body.posed_points(h[None], ("left_hip", "right_hip"))[0].mean(axis=0)
+    h[:3] += hip - posed_mid
+    return h

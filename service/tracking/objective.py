@@ -1,0 +1,168 @@
+"""The paper's objective ``E = w_D·E_D + w_J·E_J`` (§2.3), evaluated for all particles at once.
+
+Units (chosen so that the paper's balance w_D = 3, w_J = 1, α = 0.97 works; see the w_D
+sweep in BENCHMARKS.md):
+
+* ``E_D = (1/N_P) Σ_{p∈B} min(|d^h_p − d^o_p|, T)`` in **centimetres**: the OpenCL scorer's
+  per-particle sum over the observed pixels of the tile over B (invalid depth ignored,
+  T = 0.30 m), divided by N_P = the number of tile pixels where the *reference* pose (the
+  previous solution, or the initial guess on the first frame) is rendered, observed and
+  within T — one normalisation shared by every particle of the frame. N_P is at least a
+  tenth of the observed pixels, so a bad reference cannot inflate E_D without bound.
+* ``E_J2D`` in **pixels** and ``E_J3D`` in **millimetres**: weighted means of the distances
+  between the model's points (projected for 2D) and the detected 2D joints j^e / their lift
+  J^e, with w = 0.2 for hips, 1.8 for wrists and ankles, 1 otherwise; joints missing from
+  the detection, below ``min_score`` or without depth drop out of their term.
+* ``E_J = α·E_J2D + (1 − α)·E_J3D``, α = 0.97.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from swarmpose.body.kinematics import skinning_transforms, transform_points
+from swarmpose.body.skeleton import joint_weight
+from swarmpose.body.skinned import SkinnedBody
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import ConfigError
+from swarmpose.detect.joints import Joints2D
+from swarmpose.tracking.lift import lift_detection
+
+
+@dataclass(frozen=True)
+class ObjectiveWeights:
+    """w_D, w_J, α, the clamp T (m) and the lowest detection score a joint needs."""
+
+    depth: float = 3.0
+    joints: float = 1.0
+    alpha: float = 0.97
+    threshold_m: float = 0.30
+    min_score: float = 0.3
+
+    def __post_init__(self) -> None:
+        for name in ("depth", "joints", "threshold_m"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ConfigError(f"objective weight {name} must be finite and >= 0, got {value}")
+        if not 0.0 <= self.alpha <= 1.0:
+            raise ConfigError(f"alpha must be within 0..1, got {self.alpha}")
+        if self.depth == 0 and self.joints == 0:
+            raise ConfigError("w_D and w_J cannot both be 0")
+
+
+@dataclass(frozen=True)
+class JointTargets:
+    """The detected joints of one frame, as the objective uses them.
+
+    names: body points with a usable detection; point_index: (n,) into the body's named
+    points; xy: (n, 2) detected pixels j^e; xyz: (n, 3) lifted J^e in m (NaN rows: no
+    depth); weight: (n,) the paper's joint weights.
+    """
+
+    names: tuple[str, ...]
+    point_index: np.ndarray
+    xy: np.ndarray
+    xyz: np.ndarray
+    weight: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return len(self.names)
+
+    @property
+    def extent_px(self) -> float:
+        """The person's size in pixels: the diagonal of the detected joints' box (0 with fewer than two)."""
+        return float(np.linalg.norm(np.ptp(self.xy, axis=0))) if self.count > 1 else 0.0
+
+    @classmethod
+    def empty(cls) -> JointTargets:
+        return cls((), np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros((0, 3)), np.zeros(0))
+
+    @classmethod
+    def from_detection(cls, joints: Joints2D | None, depth: np.ndarray, intrinsics: Intrinsics,
+                       body: SkinnedBody, min_score: float = 0.3) -> JointTargets:
+        """Targets from a detection: its body points with score >= ``min_score``, lifted on ``depth``."""
+        if joints is None:
+            return cls.empty()
+        points = {k: v for k, v in joints.by_point().items() if v[2] >= min_score and k in body.point_names}
+        if not points:
+            return cls.empty()
+        lifted = lift_detection(depth, intrinsics, joints, min_score)
+        names = tuple(points)
+        return cls(names, body.point_indices(names),
+                   np.array([points[n][:2] for n in names], float),
+                   np.array([lifted.get(n, np.full(3, np.nan)) for n in names], float),
+                   np.array([joint_weight(n) for n in names], float))
+
+
+def weighted_joint_distance(model: np.ndarray, target: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """(P,) weighted mean distance between model points (P, n, k) and targets (n, k); rows of
+    ``target`` with NaN drop out. 0 when no target is usable."""
+    ok = np.all(np.isfinite(target), axis=1)
+    if not np.any(ok):
+        return np.zeros(len(model))
+    d = np.linalg.norm(model[:, ok] - target[ok], axis=2)
+    w = weight[ok]
+    return d @ w / w.sum()
+
+
+class Objective:
+    """E(h, o) for batches of poses on one frame.
+
+    Per frame call :meth:`set_frame`; then ``objective(h)`` returns E (P,) and
+    :attr:`last_parts` holds E_D, E_J2D, E_J3D, E_J (P,) of the last call.
+    ``scorer``: a :class:`~swarmpose.gpu.scorer.ParticleScorer` for the same body and intrinsics.
+    """
+
+    def __init__(self, body: SkinnedBody, intrinsics: Intrinsics, scorer,
+                 weights: ObjectiveWeights = ObjectiveWeights()):
+        self.body, self.intrinsics, self.scorer, self.weights = body, intrinsics, scorer, weights
+        self.targets = JointTargets.empty()
+        self.normaliser = 1.0
+        self.has_depth = False
+        self.last_parts: dict[str, np.ndarray] = {}
+
+    def set_frame(self, depth: np.ndarray, box, targets: JointTargets, reference: np.ndarray) -> None:
+        """Upload the observation of B, set the joint targets and N_P from the reference pose (36,)."""
+        self.scorer.set_observation(depth, box)
+        self.targets = targets
+        _, counts = self.scorer.score(np.asarray(reference, float)[None])
+        observed = int(counts["observed"][0])
+        self.has_depth = observed > 0
+        self.normaliser = float(max(int(counts["close"][0]), 0.1 * observed, 1.0))
+
+    @property
+    def uses_depth(self) -> bool:
+        return self.weights.depth > 0 and self.has_depth
+
+    @property
+    def uses_joints(self) -> bool:
+        return self.weights.joints > 0 and self.targets.count > 0
+
+    def model_points(self, transforms: np.ndarray) -> np.ndarray:
+        """The targets' model points (P, n, 3) m for bone transforms (P, B, 3, 4)."""
+        idx = self.targets.point_index
+        return transform_points(self.body.point_bones[idx], self.body.point_rest[idx], transforms)
+
+    def __call__(self, h: np.ndarray) -> np.ndarray:
+        h = np.asarray(h, dtype=np.float64)
+        transforms = skinning_transforms(self.body.rig, h)
+        w = self.weights
+        zeros = np.zeros(len(h))
+        e_d, e_2d, e_3d = zeros, zeros, zeros
+        if self.uses_depth:
+            sums, _ = self.scorer.score_transforms(transforms.astype(np.float32))
+            e_d = 100.0 * sums / self.normaliser
+        if self.uses_joints:
+            pts = self.model_points(transforms)
+            z = np.maximum(pts[..., 2:3], 1e-3)  # a point behind the camera must not flip sides
+            f = np.array([self.intrinsics.fx, self.intrinsics.fy])
+            c = np.array([self.intrinsics.cx, self.intrinsics.cy])
+            e_2d = weighted_joint_distance(pts[..., :2] / z * f + c, self.targets.xy, self.targets.weight)
+            e_3d = 1000.0 * weighted_joint_distance(pts, self.targets.xyz, self.targets.weight)
+        e_j = w.alpha * e_2d + (1.0 - w.alpha) * e_3d
+        total = w.depth * e_d + w.joints * e_j
+        self.last_parts = {"E": total, "E_D": e_d, "E_J": e_j, "E_J2D": e_2d, "E_J3D": e_3d}
+        return total

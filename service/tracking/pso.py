@@ -1,0 +1,130 @@
+"""Particle swarm optimisation with bounds, as the paper uses it (§2.4), and its perturbed variant.
+
+Update (Clerc & Kennedy's constriction, the paper's ref [6]):
+``V ← ω (V + c1 r1 (P_i − x) + c2 r2 (G − x))``, ``x ← x + V``, with c1 = 2.8, c2 = 1.3,
+ψ = c1 + c2 and ω = 2 / |2 − ψ − sqrt(ψ² − 4ψ)| ≈ 0.7298; r1, r2 ~ U(0, 1) per dimension.
+The paper's Eq. (7) as printed puts ω on the inertia term only; with ψ = 4.1 that swarm
+does not converge (``tests/test_pso.py`` shows it on test functions), so the constriction
+form is the default and the printed one is kept as ``update="printed"`` for comparison.
+
+Bounds: when a step would leave [lo, hi] in a dimension, that velocity component is
+shrunk so the particle lands on the bound (the paper's rule). ``project`` maps positions
+back onto a constraint set after each step (the tracker renormalises the quaternion).
+
+Perturbed variant (after the paper's ref [26]): every ``perturb_every`` generations a
+random ``perturb_fraction`` of the particles (never the one holding the global best) is
+moved by a caller-supplied ``perturb`` function and loses its velocity; personal bests
+are kept, so a perturbation can only add exploration.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from swarmpose.core.errors import ConfigError
+
+UPDATES = ("constriction", "printed")
+VARIANTS = ("canonical", "perturbed")
+
+
+def constriction_factor(c1: float, c2: float) -> float:
+    """ω = 2 / |2 − ψ − sqrt(ψ² − 4ψ)| with ψ = c1 + c2 > 4."""
+    psi = c1 + c2
+    if psi <= 4:
+        raise ConfigError(f"constriction needs c1 + c2 > 4, got {psi}")
+    return 2.0 / abs(2.0 - psi - np.sqrt(psi * psi - 4.0 * psi))
+
+
+@dataclass(frozen=True)
+class PsoConfig:
+    """Swarm size, budget and constants. ``variant`` canonical|perturbed, ``update`` constriction|printed."""
+
+    particles: int = 64
+    generations: int = 64
+    c1: float = 2.8
+    c2: float = 1.3
+    variant: str = "perturbed"
+    update: str = "constriction"
+    perturb_every: int = 8
+    perturb_fraction: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.particles < 1 or self.generations < 1:
+            raise ConfigError(f"PSO needs at least 1 particle and 1 generation, got {self.particles} and "
+                              f"{self.generations}")
+        if self.variant not in VARIANTS:
+            raise ConfigError(f"PSO variant must be one of {VARIANTS}, got {self.variant!r}")
+        if self.update not in UPDATES:
+            raise ConfigError(f"PSO update must be one of {UPDATES}, got {self.update!r}")
+        if self.perturb_every < 1 or not 0.0 <= self.perturb_fraction <= 1.0:
+            raise ConfigError("perturb_every must be >= 1 and perturb_fraction within 0..1")
+
+    @property
+    def omega(self) -> float:
+        return constriction_factor(self.c1, self.c2)
+
+
+@dataclass(frozen=True)
+class PsoResult:
+    """best: (D,) position; value: its objective; history: (G + 1,) best value after
+    initialisation and after each generation; evaluations: objective evaluations made."""
+
+    best: np.ndarray
+    value: float
+    history: np.ndarray
+    evaluations: int
+
+
+def _step_within(x: np.ndarray, v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The velocity shrunk per component so that x + v stays within [lo, hi]."""
+    return np.clip(x + v, lo, hi) - x
+
+
+def minimise(objective: Callable[[np.ndarray], np.ndarray], start: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+             rng: np.random.Generator, config: PsoConfig = PsoConfig(),
+             project: Callable[[np.ndarray], np.ndarray] | None = None,
+             perturb: Callable[[np.ndarray, np.random.Generator], np.ndarray] | None = None) -> PsoResult:
+    """Minimise ``objective`` (P, D) -> (P,) from initial positions ``start`` (P, D).
+
+    lo, hi: (D,) bounds (±inf allowed); start is clipped into them. Generation 0 evaluates
+    the start; each of ``config.generations`` further generations moves and evaluates all
+    particles, so the objective sees ``P·(G + 1)`` hypotheses.
+    """
+    x = np.clip(np.array(start, dtype=np.float64), lo, hi)
+    if project is not None:
+        x = project(x)
+    p_count, dim = x.shape
+    v = np.zeros_like(x)
+    values = np.asarray(objective(x), dtype=np.float64)
+    values = np.where(np.isfinite(values), values, np.inf)
+    pbest, pbest_val = x.copy(), values.copy()
+    g = int(np.argmin(pbest_val))
+    history = [pbest_val[g]]
+    omega = config.omega
+    perturbing = config.variant == "perturbed" and perturb is not None
+    for k in range(1, config.generations + 1):
+        r1, r2 = rng.random((2, p_count, dim))
+        pull = config.c1 * r1 * (pbest - x) + config.c2 * r2 * (pbest[g] - x)
+        v = omega * (v + pull) if config.update == "constriction" else pull + omega * v
+        v = _step_within(x, v, lo, hi)
+        x = x + v
+        if project is not None:
+            x = project(x)
+        if perturbing and k % config.perturb_every == 0:
+            chosen = np.flatnonzero(rng.random(p_count) < config.perturb_fraction)
+            chosen = chosen[chosen != g]
+            if chosen.size:
+                x[chosen] = np.clip(perturb(x[chosen], rng), lo, hi)
+                if project is not None:
+                    x[chosen] = project(x[chosen])
+                v[chosen] = 0.0
+        values = np.asarray(objective(x), dtype=np.float64)
+        values = np.where(np.isfinite(values), values, np.inf)
+        better = values < pbest_val
+        pbest[better], pbest_val[better] = x[better], values[better]
+        g = int(np.argmin(pbest_val))
+        history.append(pbest_val[g])
+    return PsoResult(pbest[g].copy(), float(pbest_val[g]), np.array(history), p_count * (config.generations + 1))

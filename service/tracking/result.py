@@ -1,0 +1,120 @@
+"""What tracking a frame gives: :class:`BodyResult` per person, :class:`FrameResult` per frame.
+
+Both turn into the protocol's messages (``to_message``), so a result seen through the
+Python API, written to ``poses.jsonl`` or published over zenoh is the same thing.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from swarmpose.body.skeleton import EVAL_JOINTS
+from swarmpose.detect.joints import Joints2D
+from swarmpose.messages.build import body_message, frame_message
+
+STATES = ("init", "tracking", "lost")
+
+
+@dataclass(frozen=True)
+class Joint:
+    """One joint of one body: ``position_m`` (3,) camera frame m and ``pixel`` (2,) px, each
+    None where unknown; ``confidence`` 0..1."""
+
+    position_m: np.ndarray | None
+    pixel: np.ndarray | None
+    confidence: float
+
+
+@dataclass(frozen=True)
+class BodyResult:
+    """One tracked person in one frame.
+
+    id: track id; state: init | tracking | lost; reason: why (empty when tracking
+    normally); pose: (36,) or None; joints3d: (14, 3) m, camera frame, in ``EVAL_JOINTS``
+    order (NaN where unknown); joints2d: (14, 2) px; confidence: (14,) 0..1; objective: E
+    and its terms of the chosen pose; timings_ms: where this body's time went; detection:
+    the 2D joints it was fitted to (None: none).
+    """
+
+    id: int
+    state: str
+    reason: str
+    pose: np.ndarray | None
+    joints3d: np.ndarray
+    joints2d: np.ndarray
+    confidence: np.ndarray
+    objective: Mapping[str, float] = field(default_factory=dict)
+    timings_ms: Mapping[str, float] = field(default_factory=dict)
+    detection: Joints2D | None = None
+
+    @property
+    def joints(self) -> dict[str, Joint]:
+        """The evaluation joints by name (``left_wrist``, ...)."""
+        out = {}
+        for name, p3, p2, c in zip(EVAL_JOINTS, self.joints3d, self.joints2d, self.confidence):
+            out[name] = Joint(p3.copy() if np.all(np.isfinite(p3)) else None,
+                              p2.copy() if np.all(np.isfinite(p2)) else None, float(c))
+        return out
+
+    def joints_box(self) -> np.ndarray | None:
+        """(4,) [u0, v0, u1, v1] px around the finite 2D joints (where to detect next), or None."""
+        ok = np.all(np.isfinite(self.joints2d), axis=1)
+        if not ok.any():
+            return None
+        pts = self.joints2d[ok]
+        return np.concatenate([pts.min(axis=0), pts.max(axis=0)])
+
+    def to_message(self) -> dict:
+        """This body as one entry of a frame message's ``bodies``."""
+        detection = None
+        if self.detection is not None:
+            detection = {"layout": self.detection.layout.name, "keypoints": self.detection.as_dict()}
+        return body_message(self.id, self.state, self.reason, self.pose, self.joints3d, self.joints2d,
+                            self.confidence, self.objective, detection)
+
+
+def lost_body(reason: str, body_id: int = 0, timings_ms: Mapping[str, float] | None = None) -> BodyResult:
+    """A body with no estimate (state lost) and why."""
+    n = len(EVAL_JOINTS)
+    return BodyResult(body_id, "lost", reason, None, np.full((n, 3), np.nan), np.full((n, 2), np.nan),
+                      np.zeros(n), {}, dict(timings_ms or {}))
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """Everything about one frame of a source.
+
+    index / timestamp_ns: the source's frame number and capture time; bodies: the tracked
+    people (empty when the frame was skipped or failed); reason: why there are no bodies
+    (skipped frame, detector or tracker failure; empty otherwise); timings_ms: detection and
+    tracking time; skipped: the source could not deliver the frame; received_ns: wall-clock
+    time (ns) the frame was taken from the source (latency counts from there).
+    """
+
+    index: int
+    timestamp_ns: int
+    bodies: tuple[BodyResult, ...] = ()
+    reason: str = ""
+    timings_ms: Mapping[str, float] = field(default_factory=dict)
+    skipped: bool = False
+    received_ns: int = 0
+
+    @property
+    def state(self) -> str:
+        """``skipped``, the first body's state, or ``lost`` (no body)."""
+        if self.skipped:
+            return "skipped"
+        return self.bodies[0].state if self.bodies else "lost"
+
+    def to_message(self, camera: str = "camera0", *, received_ns: int | None = None,
+                   publish_ns: int | None = None) -> dict:
+        """The protocol's ``swarmpose.frame`` message of this frame (``protocol/frame.schema.json``).
+        publish_ns: now unless given; received_ns: this result's (or publish time when unknown)."""
+        publish = time.time_ns() if publish_ns is None else int(publish_ns)
+        received = received_ns if received_ns is not None else (self.received_ns or publish)
+        return frame_message(camera, self.index, self.timestamp_ns, received, publish,
+                             [b.to_message() for b in self.bodies], reason=self.reason, timings_ms=self.timings_ms)

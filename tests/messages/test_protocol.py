@@ -1,0 +1,123 @@
+"""The protocol's JSON Schemas: valid schemas, messages the code builds pass them, broken ones fail
+with the field named, and the committed examples stay valid."""
+
+from __future__ import annotations
+
+import copy
+import json
+import re
+from dataclasses import replace
+
+import jsonschema
+import numpy as np
+import pytest
+from conftest import REPO
+
+from swarmpose.body.loader import load_body
+from swarmpose.body.skeleton import EVAL_JOINTS, EVAL_LINKS, neutral_pose
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import ConfigError, ProtocolError
+from swarmpose.messages import (
+    POSE_NAMES,
+    check_camera_id,
+    decode,
+    encode,
+    frame_message,
+    info_message,
+    keys,
+    schema,
+    validate,
+)
+from swarmpose.tracking.result import BodyResult
+
+
+def body_entry(result: BodyResult, body_id: int = 0) -> dict:
+    """One body of a frame message, as the tracker writes it."""
+    return replace(result, id=body_id).to_message()
+
+
+def a_result(state: str = "tracking") -> BodyResult:
+    body = load_body("builtin")
+    h = neutral_pose()
+    joints3d = body.posed_points(h[None], EVAL_JOINTS)[0]
+    intr = Intrinsics.kinect_v1()
+    joints2d = np.stack([intr.fx * joints3d[:, 0] / joints3d[:, 2] + intr.cx,
+                         intr.fy * joints3d[:, 1] / joints3d[:, 2] + intr.cy], axis=1)
+    joints3d[6] = np.nan   # an unknown joint
+    return BodyResult(id=0, state=state, reason="", pose=h, joints3d=joints3d,
+                       joints2d=joints2d, confidence=np.linspace(0, 1, len(EVAL_JOINTS)),
+                       objective={"E": 12.5, "E_D": 3.0, "E_J": 3.5}, timings_ms={"pso": 410.0})
+
+
+def test_the_schemas_are_valid_draft_2020_12():
+    for name in ("frame", "status", "info"):
+        jsonschema.Draft202012Validator.check_schema(schema(name))
+        assert schema(name)["properties"]["schema"]["const"] == f"swarmpose.{name}"
+
+
+def test_a_frame_message_from_a_tracker_result_is_valid_and_round_trips():
+    result = a_result()
+    message = frame_message("cam0", 4, 133_333_333, 1_000, 251_000_000, [body_entry(result)],
+                            timings_ms=result.timings_ms)
+    validate(message)
+    back = decode(encode(message))
+    assert back == message and back["latency_ms"] == 250.999
+    head = back["bodies"][0]["joints"]["head"]
+    assert head["position_m"] == pytest.approx(result.joints3d[0], abs=1e-6)
+    assert back["bodies"][0]["joints"]["left_wrist"]["position_m"] is None       # NaN -> null, never NaN
+    assert len(back["bodies"][0]["pose"]) == len(POSE_NAMES) == 36
+
+
+@pytest.mark.parametrize(("mutate", "where"), [
+    (lambda m: m.pop("capture_ns"), "(top level)"),
+    (lambda m: m["bodies"][0]["pose"].pop(), "bodies/0/pose"),
+    (lambda m: m["bodies"][0]["joints"]["head"].update(confidence=1.5), "bodies/0/joints/head/confidence"),
+    (lambda m: m["bodies"][0].update(state="dancing"), "bodies/0/state"),
+    (lambda m: m.update(camera="a/b"), "camera"),
+    (lambda m: m.update(version=1), "version"),
+])
+def test_broken_frame_messages_fail_naming_the_field(mutate, where):
+    message = frame_message("cam0", 4, 0, 0, 0, [body_entry(a_result())])
+    broken = copy.deepcopy(message)
+    mutate(broken)
+    with pytest.raises(ProtocolError, match=re.escape(f"invalid at {where}")):
+        validate(broken)
+
+
+def test_non_messages_are_rejected():
+    with pytest.raises(ProtocolError, match="not JSON"):
+        decode(b"\xff\xfe")
+    with pytest.raises(ProtocolError, match="JSON list"):
+        decode(b"[1, 2]")
+    with pytest.raises(ProtocolError, match="not a swarmpose message"):
+        validate({"schema": "other.thing"})
+    with pytest.raises(ValueError):
+        encode({"x": float("nan")})
+
+
+def test_info_message_describes_skeleton_pose_and_camera():
+    body = load_body("builtin")
+    info = info_message("cam0", intrinsics=Intrinsics.kinect_v1(), body=body, body_spec="builtin",
+                        source="folder:x", detector="simulated")
+    validate(info)
+    assert info["keys"] == keys("cam0") == {"frame": "swarmpose/cam0/frame", "status": "swarmpose/cam0/status",
+                                            "alive": "swarmpose/cam0/alive", "info": "swarmpose/cam0/info"}
+    assert info["skeleton"]["links"] == [list(x) for x in EVAL_LINKS]
+    assert all(a in EVAL_JOINTS and b in EVAL_JOINTS for a, b in EVAL_LINKS)
+    assert info["pose_vector"]["names"][7] == "neck.roll" and len(info["pose_vector"]["limits_rad"]) == 29
+    assert info["intrinsics"]["fx"] == 525.0 and info["body"]["bones"] == len(body.bone_names)
+    validate(info_message("cam0"))          # before the first frame: no intrinsics, no body yet
+
+
+def test_camera_ids_that_would_break_key_expressions_are_refused():
+    for bad in ("", "a/b", "cam*", "a b", "x" * 65):
+        with pytest.raises(ConfigError, match="camera id"):
+            check_camera_id(bad)
+    assert check_camera_id("kinect_0.left-1") == "kinect_0.left-1"
+
+
+def test_the_committed_examples_are_valid():
+    for name in ("frame", "status", "info"):
+        example = json.loads((REPO / "protocol" / "examples" / f"{name}.json").read_text())
+        validate(example)
+        jsonschema.validate(example, json.loads((REPO / "protocol" / f"{name}.schema.json").read_text()))

@@ -1,0 +1,105 @@
+"""The public Python API (``swarmpose.Tracker``, ``swarmpose.track``) and the example program:
+checked against the sequence's ground truth, against the command line (one pipeline for
+both), and on bad input."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import swarmpose
+from swarmpose.cli.main import main
+from swarmpose.core.errors import ConfigError, ShapeError
+from swarmpose.messages import validate
+from swarmpose.sources.groundtruth import load_ground_truth
+
+REPO = Path(__file__).resolve().parents[2]
+FAST = {"particles": 16, "generations": 12}
+
+
+def test_the_example_program_tracks_a_synthetic_sequence(wave_sequence):
+    run = subprocess.run([sys.executable, str(REPO / "examples" / "track_my_camera.py"), str(wave_sequence),
+                          "--frames", "4", "--particles", "16", "--generations", "12", "--json"],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    messages = [validate(json.loads(line)) for line in run.stdout.splitlines()]
+    assert [m["frame"] for m in messages] == [0, 1, 2, 3] and all(m["camera"] == "kinect0" for m in messages)
+    gt = load_ground_truth(wave_sequence)
+    names = list(messages[0]["bodies"][0]["joints"])
+    est = np.array([[m["bodies"][0]["joints"][n]["position_m"] for n in names] for m in messages])
+    assert 1000 * np.linalg.norm(est - gt.joints3d[:4], axis=2).mean() < 80
+
+
+def test_track_gives_what_the_command_line_writes(wave_sequence, tmp_path):
+    """swarmpose.track and `swarmpose track` run the same per-frame step: same poses, same messages."""
+    api = list(swarmpose.track(f"folder:{wave_sequence}", detector="simulated", frames=4, **FAST))
+    assert [r.index for r in api] == [0, 1, 2, 3] and [r.state for r in api] == ["init"] + ["tracking"] * 3
+    assert main(["track", str(wave_sequence), "--out", str(tmp_path), "--frames", "4", "--particles", "16",
+                 "--generations", "12", "--no-overlay", "-q"]) == 0
+    cli = [json.loads(line) for line in (tmp_path / "poses.jsonl").read_text().splitlines()]
+    for result, message in zip(api, cli):
+        ours = result.to_message("camera0")
+        assert ours["bodies"] == message["bodies"]
+        body = result.bodies[0]
+        assert np.allclose(body.pose, message["bodies"][0]["pose"], atol=1e-6)
+        wrist = body.joints["left_wrist"]
+        assert np.allclose(wrist.position_m, message["bodies"][0]["joints"]["left_wrist"]["position_m"], atol=1e-6)
+        assert 0.0 <= wrist.confidence <= 1.0 and wrist.pixel.shape == (2,)
+
+
+def test_tracker_on_arrays_follows_the_ground_truth(wave_sequence):
+    source = swarmpose.open_source(f"folder:{wave_sequence}")
+    frames = [f for f in source if isinstance(f, swarmpose.Frame)]
+    body = swarmpose.load_body("builtin")
+    with swarmpose.Tracker(body=body, detector="simulated", intrinsics=frames[0].intrinsics, source=source,
+                           **FAST) as tracker:
+        results = [tracker.track(f.depth, f.color, timestamp_ns=f.timestamp_ns) for f in frames[:4]]
+    source.close()
+    assert [r.index for r in results] == [0, 1, 2, 3]
+    gt = load_ground_truth(wave_sequence)
+    est = np.array([r.bodies[0].joints3d for r in results])
+    assert 1000 * np.linalg.norm(est - gt.joints3d[:4], axis=2).mean() < 80
+    with pytest.raises(ConfigError, match="closed"):
+        tracker.track(frames[0].depth)
+
+
+def test_bad_input_is_named(wave_sequence):
+    K = swarmpose.Intrinsics(640, 480, 525.0, 525.0, 319.5, 239.5)
+    with pytest.raises(ConfigError, match="unknown setting"):
+        swarmpose.Tracker(detector="simulated", particels=3)
+    with pytest.raises(ConfigError, match="particles must be at least 1"):
+        swarmpose.Tracker(particles=0)
+    source = swarmpose.open_source(f"folder:{wave_sequence}")
+    with swarmpose.Tracker(detector="simulated", source=source, mode="lift") as tracker:
+        with pytest.raises(ConfigError, match="intrinsics"):
+            tracker.track(np.zeros((480, 640), np.float32))
+    with swarmpose.Tracker(detector="simulated", source=source, intrinsics=K, mode="lift") as tracker:
+        with pytest.raises(ShapeError, match="depth_m has shape"):
+            tracker.track(np.zeros((48, 64), np.float32))
+        with pytest.raises(ShapeError, match="rgb"):
+            tracker.track(np.zeros((480, 640), np.float32), np.zeros((480, 640), np.uint8))
+        empty = tracker.track(np.zeros((480, 640), np.float32))  # no person: a body that is lost, and why
+        assert empty.bodies[0].state == "lost" and empty.bodies[0].reason
+    source.close()
+
+
+def test_import_is_light_and_the_package_logs_nowhere_by_default():
+    code = ("import sys, logging, swarmpose; heavy = [m for m in ('open3d', 'pyopencl', 'onnxruntime', 'zenoh') "
+            "if m in sys.modules]; print(heavy, logging.getLogger('swarmpose').handlers)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.startswith("[] [<NullHandler")
+    assert sorted(swarmpose.__all__) == swarmpose.__all__ and "Tracker" in dir(swarmpose)
+
+
+def test_subscribe_has_normal_flags_and_help():
+    run = subprocess.run([sys.executable, "-m", "swarmpose", "subscribe", "--help"], capture_output=True, text=True,
+                         timeout=60)
+    assert run.returncode == 0 and "--count" in run.stdout and "--connect" in run.stdout
+    run = subprocess.run([sys.executable, "-m", "swarmpose", "subscribe", "--count", "1", "--timeout", "0.5",
+                          "--no-multicast", "--connect", "tcp/127.0.0.1:1"], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 1 and "got 0 of 1 frames" in run.stderr

@@ -1,0 +1,271 @@
+"""The worker: hand-overs, replay and live policies, failures that must not stop it, status, health.
+
+Real parts throughout (folder source on a synthetic sequence, the simulated detector, the
+tracker); failures are injected by wrapping a real part so that it fails the way a broken
+camera, detector or frame would.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from swarmpose.body.loader import load_body
+from swarmpose.body.skeleton import EVAL_JOINTS
+from swarmpose.cli.main import main
+from swarmpose.core.errors import DetectorError, OutputError, SourceError
+from swarmpose.detect.registry import make_detector
+from swarmpose.messages import validate
+from swarmpose.pipeline.handover import END, Handover
+from swarmpose.pipeline.status import HealthFileSink, write_health_file
+from swarmpose.pipeline.step import FramePipeline
+from swarmpose.pipeline.worker import Worker
+from swarmpose.publish.files import JsonlSink
+from swarmpose.sources.base import FrameSource
+from swarmpose.sources.groundtruth import load_ground_truth
+from swarmpose.sources.registry import open_source
+from swarmpose.tracking.body_tracker import BodyTracker
+from swarmpose.tracking.config import TrackerConfig
+
+LIFT = TrackerConfig(mode="lift")
+SMALL = TrackerConfig(particles=12, generations=8)
+
+
+class Collect:
+    """A sink that keeps what it is given."""
+
+    def __init__(self):
+        self.frames, self.statuses, self.closed = [], [], 0
+
+    def frame(self, message, frame):
+        self.frames.append(message)
+
+    def status(self, message):
+        self.statuses.append(message)
+
+    def close(self):
+        self.closed += 1
+
+
+@pytest.fixture(scope="module")
+def body():
+    return load_body("builtin")
+
+
+def make_worker(sequence, body, sinks, config=LIFT, *, drop_stale=False, source=None, detector=None, **kw):
+    uri = f"folder:{sequence}"
+    source = source or open_source(uri)
+    detector = detector or make_detector("simulated", source)
+    pipeline = FramePipeline(detector, lambda intr: BodyTracker(body, intr, config))
+    return Worker(lambda: open_source(uri), pipeline, sinks,
+                  camera="test", drop_stale=drop_stale, source_uri=uri, detector_spec="simulated",
+                  status_period_s=kw.pop("status_period_s", 0.2), source=source, **kw)
+
+
+# ---------------------------------------------------------------------------------------------- hand-over
+def test_handover_drops_the_waiting_item_when_live():
+    slot = Handover(drop_stale=True)
+    assert slot.put(1) is True and slot.put(2) is False and slot.put(3) is False
+    assert slot.get() == 3
+    slot.put(4)
+    slot.finish()
+    assert slot.get() == 4 and slot.get() is END
+
+
+def test_handover_makes_the_producer_wait_in_replay():
+    slot = Handover(drop_stale=False)
+    slot.put(1)
+    done = threading.Event()
+    threading.Thread(target=lambda: (slot.put(2), done.set()), daemon=True).start()
+    assert not done.wait(0.2)          # the second put waits for the consumer
+    assert slot.get() == 1
+    assert done.wait(2) and slot.get() == 2
+    slot.abort()
+    assert slot.get() is END
+
+
+# ---------------------------------------------------------------------------------------------- pipelines
+def test_replay_publishes_every_frame_in_order_with_valid_messages(wave_sequence, body):
+    sink = Collect()
+    stats = make_worker(wave_sequence, body, [sink]).run()
+    assert [m["frame"] for m in sink.frames] == list(range(6))
+    for m in sink.frames:
+        validate(m)
+        assert m["bodies"][0]["state"] == "tracking" and m["latency_ms"] >= 0
+    truth = load_ground_truth(wave_sequence).joints3d
+    est = np.array([[m["bodies"][0]["joints"][j]["position_m"] or [np.nan] * 3 for j in EVAL_JOINTS]
+                    for m in sink.frames])
+    assert np.nanmean(np.linalg.norm(est - truth, axis=2)) < 0.08   # J^e lifted from the simulated detections
+    assert (stats.received, stats.published, stats.dropped, stats.skipped, stats.failed) == (6, 6, 0, 0, 0)
+    last = sink.statuses[-1]
+    validate(last)
+    assert last["state"] == "source-ended" and last["frames"]["published"] == 6 and sink.closed == 1
+
+
+def test_replay_latency_is_the_processing_time_not_the_queue(wave_sequence, body):
+    """Frames queue behind each other in replay; the latency leaves that out (tracking time + detection)."""
+    sink = Collect()
+    make_worker(wave_sequence, body, [sink], SMALL).run()
+    for m in sink.frames[1:]:
+        tracking = m["timings_ms"]["total"]
+        assert tracking <= m["latency_ms"] < 1.5 * tracking + 100, (m["frame"], tracking, m["latency_ms"])
+
+
+def test_live_keeps_the_newest_frame_and_counts_the_dropped(wave_sequence, body):
+    sink = Collect()
+    stats = make_worker(wave_sequence, body, [sink], SMALL, drop_stale=True, pace_fps=200.0).run()
+    frames = [m["frame"] for m in sink.frames]
+    assert frames == sorted(frames) and frames[-1] == 5    # in order, and the newest frame is always tracked
+    assert stats.dropped > 0 and stats.published + stats.dropped == stats.received == 6
+    assert sink.statuses[-1]["frames"]["dropped"] == stats.dropped
+    assert sink.statuses[-1]["opencl_device"]                 # the scorer's device is reported
+
+
+class FlakyDetector:
+    """The real detector, failing on chosen frames as a crashing network would."""
+
+    def __init__(self, inner, fail_on):
+        self.inner, self.fail_on = inner, set(fail_on)
+
+    def detect(self, frame, box=None):
+        if frame.index in self.fail_on:
+            raise RuntimeError("onnxruntime: CUDA out of memory")
+        return self.inner.detect(frame, box)
+
+    def close(self):
+        self.inner.close()
+
+
+def test_a_detector_that_throws_is_reported_and_the_frame_still_tracked(wave_sequence, body):
+    source = open_source(f"folder:{wave_sequence}")
+    detector = FlakyDetector(make_detector("simulated", source), {2})
+    sink = Collect()
+    stats = make_worker(wave_sequence, body, [sink], SMALL, source=source, detector=detector).run()
+    assert [m["frame"] for m in sink.frames] == list(range(6))
+    hit = sink.frames[2]
+    assert "detector failed: CUDA out of memory" in hit["reason"].replace("onnxruntime: ", "")
+    assert hit["bodies"] and hit["bodies"][0]["pose"] is not None     # tracked on depth from the previous pose
+    assert stats.detector_errors == 1 and stats.failed == 1
+    status = sink.statuses[-1]
+    assert status["detector"]["errors"] == 1 and "CUDA out of memory" in status["detector"]["last_error"]
+
+
+class BadFrameSource(FrameSource):
+    """The real folder source, with frame ``bad`` cropped to a size the tracker cannot use."""
+
+    def __init__(self, inner, bad):
+        self.inner, self.bad, self.uri, self.length = inner, bad, inner.uri, inner.length
+
+    def _frames(self):
+        for item in self.inner:
+            if getattr(item, "index", None) == self.bad:
+                item = replace(item, depth=item.depth[:100, :100])
+            yield item
+
+
+def test_a_frame_that_fails_to_track_is_published_empty_and_the_track_restarts(wave_sequence, body):
+    inner = open_source(f"folder:{wave_sequence}")
+    source = BadFrameSource(inner, 3)
+    sink = Collect()
+    make_worker(wave_sequence, body, [sink], LIFT, source=source, detector=make_detector("simulated", inner)).run()
+    assert [m["frame"] for m in sink.frames] == list(range(6))
+    bad = sink.frames[3]
+    assert bad["bodies"] == [] and bad["reason"].startswith("tracking failed") and "100x100" in bad["reason"]
+    assert sink.frames[4]["bodies"][0]["state"] == "tracking"
+    assert sink.statuses[-1]["tracker"]["failures"] == 1 and sink.statuses[-1]["frames"]["failed"] == 1
+
+
+class DyingSource(FrameSource):
+    """The real folder source, whose device 'vanishes' after ``keep`` frames."""
+
+    def __init__(self, inner, keep, live=False):
+        self.inner, self.keep, self.live, self.uri = inner, keep, live, inner.uri
+
+    def _frames(self):
+        for i, item in enumerate(self.inner):
+            if i == self.keep:
+                raise SourceError("USB device disconnected")
+            yield item
+
+
+def test_a_recording_that_dies_ends_the_run_keeping_every_line(wave_sequence, body, tmp_path):
+    inner = open_source(f"folder:{wave_sequence}")
+    jsonl = JsonlSink(tmp_path / "poses.jsonl")
+    sink = Collect()
+    worker = make_worker(wave_sequence, body, [sink, jsonl], source=DyingSource(inner, 3),
+                         detector=make_detector("simulated", inner))
+    worker.run()
+    lines = [json.loads(x) for x in (tmp_path / "poses.jsonl").read_text().splitlines()]
+    assert [x["frame"] for x in lines] == [0, 1, 2]
+    status = sink.statuses[-1]
+    assert status["state"] == "source-failed" and "USB device disconnected" in status["source"]["state"]
+    assert any("USB device disconnected" in e for e in status["errors"])
+
+
+def test_a_live_source_that_dies_is_reopened(wave_sequence, body):
+    inner = open_source(f"folder:{wave_sequence}")
+    sink = Collect()
+    worker = make_worker(wave_sequence, body, [sink], source=DyingSource(inner, 2, live=True),
+                         detector=make_detector("simulated", inner), reopen_s=0.1)
+    worker.run()
+    frames = [m["frame"] for m in sink.frames]
+    assert frames == [0, 1] + list(range(6))          # the reopened source delivers from its start again
+    assert any("reopening in 0.1 s" in e for e in sink.statuses[-1]["errors"])
+
+
+class BrokenSink(Collect):
+    def frame(self, message, frame):
+        raise OutputError("disk full writing /data/poses.csv")
+
+
+def test_a_failing_sink_is_reported_and_the_others_go_on(wave_sequence, body):
+    good = Collect()
+    make_worker(wave_sequence, body, [BrokenSink(), good]).run()
+    assert len(good.frames) == 6
+    assert any("disk full" in e for e in good.statuses[-1]["errors"])
+
+
+def test_stop_ends_a_running_worker_promptly(wave_sequence, body):
+    sink = Collect()
+    worker = make_worker(wave_sequence, body, [sink], SMALL, drop_stale=True, pace_fps=2.0, loop=True)
+    threading.Timer(1.5, worker.stop).start()
+    t0 = time.monotonic()
+    worker.run()
+    assert time.monotonic() - t0 < 20
+    assert sink.statuses[-1]["state"] == "stopping" and sink.closed == 1
+
+
+# ---------------------------------------------------------------------------------------------- health
+def test_health_reads_the_status_file(wave_sequence, body, tmp_path, capsys):
+    health = tmp_path / "status.json"
+    make_worker(wave_sequence, body, [HealthFileSink(health)]).run()
+    status = json.loads(health.read_text())
+    validate(status)
+    assert main(["health", "--file", str(health)]) == 1
+    assert "worker state source-ended" in capsys.readouterr().out
+    write_health_file(str(health), {**status, "state": "running", "time_ns": time.time_ns()})
+    assert main(["health", "--file", str(health)]) == 0
+    write_health_file(str(health), {**status, "state": "running", "time_ns": time.time_ns() - int(60e9)})
+    assert main(["health", "--file", str(health), "--max-age", "15"]) == 1
+    assert "60.0 s old" in capsys.readouterr().out.splitlines()[-1]
+    assert main(["health", "--file", str(tmp_path / "none.json")]) == 1
+    assert "no status" in capsys.readouterr().out
+
+
+def test_a_detector_error_type_from_the_project_is_reported_the_same(wave_sequence, body):
+    source = open_source(f"folder:{wave_sequence}")
+
+    class Refusing(FlakyDetector):
+        def detect(self, frame, box=None):
+            raise DetectorError("model.onnx: input has 4 channels, expected 3")
+
+    sink = Collect()
+    make_worker(wave_sequence, body, [sink], source=source,
+                detector=Refusing(make_detector("simulated", source), set())).run()
+    assert all("expected 3" in m["reason"] for m in sink.frames)
+    assert all(m["bodies"][0]["state"] == "lost" for m in sink.frames)   # lift mode: no joints, no answer

@@ -1,0 +1,271 @@
+"""The replay files: poses.jsonl, poses.csv, poses.bvh and open_recording.
+
+Oracles: JSON and CSV are read back with the stdlib readers and compared with the messages;
+the BVH is read back with the third-party ``bvhio`` and with ``swarmpose.motion.bvh`` and its
+joint positions compared with the bone heads of ``forward_kinematics`` turned Y up
+(x 100 cm, y and z negated).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from conftest import MAKEHUMAN, needs_assets
+from scipy.spatial.transform import Rotation
+
+from swarmpose.body.kinematics import forward_kinematics, matrix_to_quaternion
+from swarmpose.body.loader import load_body
+from swarmpose.body.skeleton import ANGLE_LIMITS, EVAL_JOINTS
+from swarmpose.core.errors import OutputError
+from swarmpose.messages import POSE_NAMES, frame_message, validate
+from swarmpose.motion.builtin import builtin_motion
+from swarmpose.motion.bvh import read_bvh
+from swarmpose.publish.files import BvhSink, CsvSink, JsonlSink, open_recording
+from swarmpose.publish.overlay import OverlaySink
+from swarmpose.sim.synth import SynthConfig, place_camera
+from swarmpose.tracking.result import BodyResult
+
+TO_BVH = np.array([100.0, -100.0, -100.0])  # camera frame m -> BVH world cm (Y up)
+
+
+def result(seed: int, pose: np.ndarray | None = None, state: str = "tracking", reason: str = "",
+           unknown: tuple[int, ...] = ()) -> BodyResult:
+    """A BodyResult with random joints; joints listed in ``unknown`` are NaN (null in the message)."""
+    rng = np.random.default_rng(seed)
+    joints3d = rng.uniform(-1, 1, (14, 3)) + [0, 0, 3]
+    joints2d = rng.uniform(0, 640, (14, 2))
+    joints3d[list(unknown)] = np.nan
+    joints2d[list(unknown)] = np.nan
+    return BodyResult(id=0, state=state, reason=reason,
+                       pose=None if pose is None else np.asarray(pose, dtype=float),
+                       joints3d=joints3d, joints2d=joints2d, confidence=rng.uniform(0, 1, 14),
+                       objective={"E": float(rng.uniform(0, 5)), "E_D": 1.0}, timings_ms={})
+
+
+def message(index: int, bodies: list[dict], reason: str = "") -> dict:
+    t0 = 1_700_000_000_000_000_000 + index * 33_000_000
+    return frame_message("cam0", index, index * 33_333_333, t0, t0 + 12_345_678, bodies, reason)
+
+
+def sample_messages() -> list[dict]:
+    rng = np.random.default_rng(7)
+    pose = np.concatenate([[0.1, -0.2, 3.0, 0.0, 1.0, 0.0, 0.0], rng.uniform(-0.2, 0.2, 29)])
+    return [
+        message(0, [body_entry(result(1, pose))]),
+        message(1, [], reason="skipped: color/000001.png missing"),
+        message(2, [body_entry(result(2, pose, unknown=(3, 7))), body_entry(result(3, None, "init", "no joints"), 1)]),
+    ]
+
+
+# ---------------------------------------------------------------------------- JSONL
+
+
+def body_entry(result: BodyResult, body_id: int = 0) -> dict:
+    """One body of a frame message, as the tracker writes it."""
+    return replace(result, id=body_id).to_message()
+def test_jsonl_lines_are_the_messages_and_on_disk_at_once(tmp_path):
+    path = tmp_path / "poses.jsonl"
+    messages = sample_messages()
+    sink = JsonlSink(path)
+    for k, msg in enumerate(messages):
+        sink.frame(msg, None)
+        lines = path.read_text("utf-8").splitlines()  # read back before close
+        assert len(lines) == k + 1
+        assert json.loads(lines[-1]) == msg
+    sink.status({"schema": "swarmpose.status"})  # not recorded
+    sink.close()
+    sink.close()  # idempotent
+    lines = path.read_text("utf-8").splitlines()
+    assert [json.loads(line) for line in lines] == messages
+    for line in lines:
+        validate(json.loads(line))
+        assert line == json.dumps(json.loads(line), separators=(",", ":"))  # compact, no spaces outside strings
+    with pytest.raises(OutputError, match="closed"):
+        sink.frame(messages[0], None)
+
+
+# ---------------------------------------------------------------------------- CSV
+def expected_header() -> list[str]:
+    joints = [f"{j}_{f}" for j in EVAL_JOINTS for f in ("x", "y", "z", "u", "v", "confidence")]
+    return ["frame", "capture_ns", "received_ns", "publish_ns", "latency_ms", "body_id", "state", "reason",
+            *joints, *POSE_NAMES, "objective"]
+
+
+def cell(value) -> str:
+    """How a message value must appear in the CSV: empty when unknown, else a number."""
+    return "" if value is None else value
+
+
+def test_csv_rows_hold_the_message_values(tmp_path):
+    path = tmp_path / "poses.csv"
+    messages = sample_messages()
+    sink = CsvSink(path)
+    sink.frame(messages[0], None)
+    with open(path, newline="", encoding="utf-8") as f:  # on disk before close
+        assert len(list(csv.reader(f))) == 2
+    for msg in messages[1:]:
+        sink.frame(msg, None)
+    sink.close()
+    sink.close()
+    with open(path, newline="", encoding="utf-8") as f:
+        reader = csv.DictReader(f)
+        assert reader.fieldnames == expected_header()
+        rows = list(reader)
+    assert [int(r["frame"]) for r in rows] == [0, 1, 2, 2]  # one row per frame and body
+    assert len(expected_header()) == 8 + 14 * 6 + 36 + 1
+
+    # frame 1: no body -> one row, empty body cells, the frame's reason
+    empty = rows[1]
+    assert empty["reason"] == messages[1]["reason"]
+    assert empty["body_id"] == empty["state"] == empty["objective"] == ""
+    assert all(empty[c] == "" for c in expected_header()[8:])
+    assert int(empty["publish_ns"]) == messages[1]["publish_ns"]
+
+    for row, (msg, body) in zip([rows[0], rows[2], rows[3]],
+                                [(messages[0], messages[0]["bodies"][0]), (messages[2], messages[2]["bodies"][0]),
+                                 (messages[2], messages[2]["bodies"][1])]):
+        for key in ("frame", "capture_ns", "received_ns", "publish_ns"):
+            assert int(row[key]) == msg[key]
+        assert float(row["latency_ms"]) == msg["latency_ms"]
+        assert int(row["body_id"]) == body["id"] and row["state"] == body["state"]
+        for name in EVAL_JOINTS:
+            joint = body["joints"][name]
+            got = [row[f"{name}_{f}"] for f in ("x", "y", "z", "u", "v")]
+            want = (joint["position_m"] or [None] * 3) + (joint["pixel"] or [None] * 2)
+            assert [float(g) if g else None for g in got] == want
+            assert float(row[f"{name}_confidence"]) == joint["confidence"]
+        pose = [row[n] for n in POSE_NAMES]
+        assert [float(p) if p else None for p in pose] == (body["pose"] or [None] * 36)
+        assert float(row["objective"]) == body["objective"]["E"]
+    # the unknown joints of body 0 of frame 2 are empty cells
+    assert rows[2][f"{EVAL_JOINTS[3]}_x"] == "" and rows[2][f"{EVAL_JOINTS[7]}_u"] == ""
+    assert rows[3]["reason"] == "no joints" and rows[3]["tx"] == ""
+
+
+# ---------------------------------------------------------------------------- BVH
+def bvhio_positions(path, names: tuple[str, ...], frames: int) -> np.ndarray:
+    """World positions (N, B, 3) of the named joints per frame, as bvhio computes them."""
+    import bvhio
+
+    root = bvhio.readAsHierarchy(str(path))
+    joints = {joint.Name: joint for joint, _, _ in root.layout()}
+    out = np.empty((frames, len(names), 3))
+    for f in range(frames):
+        root.loadPose(f)
+        out[f] = [list(joints[n].PositionWorld) for n in names]
+    return out
+
+
+def own_positions(path, names: tuple[str, ...]) -> np.ndarray:
+    clip = read_bvh(path)
+    _, pos = clip.global_transforms()
+    return pos[:, [clip.joint_index(n) for n in names]]
+
+
+def write_and_check(tmp_path, body, poses: np.ndarray, fps: float = 30.0) -> None:
+    """Write ``poses`` (with frames lacking a pose in between) and compare both readers with FK."""
+    path = tmp_path / "poses.bvh"
+    _, heads = forward_kinematics(body.rig, poses)
+    expected = heads * TO_BVH
+    sink = BvhSink(path, body, fps=fps)
+    want = []
+    for k, h in enumerate(poses):
+        sink.frame(message(k, [body_entry(result(k, h))]), None)
+        want.append(expected[k])
+        if k % 4 == 1:  # a frame with no body, then one whose body has no pose: both repeat the row
+            sink.frame(message(k, [], "no person"), None)
+            sink.frame(message(k, [body_entry(result(k, None, "lost", "lost"))]), None)
+            want += [expected[k], expected[k]]
+        if k == 2:  # the file is complete while being written
+            assert own_positions(path, body.bone_names).shape[0] == len(want)
+    sink.close()
+    sink.close()
+    want = np.array(want)
+    clip = read_bvh(path)
+    assert len(clip) == len(want)
+    assert clip.frame_time == pytest.approx(1.0 / fps, rel=1e-6)
+    assert set(clip.joint_names) == set(body.bone_names)
+    for b, parent in enumerate(body.bone_parents):  # the hierarchy is the rig's
+        if parent >= 0:
+            assert clip.joint_names[clip.parents[clip.joint_index(body.bone_names[b])]] == body.bone_names[parent]
+    np.testing.assert_allclose(own_positions(path, body.bone_names), want, atol=1e-3)
+    np.testing.assert_allclose(bvhio_positions(path, body.bone_names, len(want)), want, atol=1e-3)
+    rows = path.read_text("ascii").splitlines()[-len(want):]
+    assert rows[1] == rows[2] == rows[3]  # the repeated rows are the same text
+
+
+@pytest.fixture(scope="module")
+def builtin_body():
+    return load_body("builtin", "default")
+
+
+def camera_poses(body, name: str, frames: int) -> np.ndarray:
+    motion = builtin_motion(name, frames, 30.0)
+    return place_camera(body, motion, SynthConfig(frames=frames, fps=30.0)).poses
+
+
+def test_bvh_of_a_walk_matches_forward_kinematics(tmp_path, builtin_body):
+    write_and_check(tmp_path, builtin_body, camera_poses(builtin_body, "walk", 12))
+
+
+def test_bvh_of_random_poses_with_gimbal_lock(tmp_path, builtin_body):
+    rng = np.random.default_rng(3)
+    n = 8
+    poses = np.zeros((n, 36))
+    poses[:, 0:3] = rng.uniform(-1, 1, (n, 3)) + [0, 0, 3]
+    poses[:, 3:7] = rng.normal(size=(n, 4))
+    poses[:, 7:] = rng.uniform(ANGLE_LIMITS[:, 0], ANGLE_LIMITS[:, 1], (n, 29))
+    # root at the ZXY singularity in the BVH world: flip (x 180) then 90 degrees about x
+    bvh_root = Rotation.from_euler("ZXY", [30, 90, -20], degrees=True).as_matrix()
+    poses[0, 3:7] = matrix_to_quaternion(np.diag([1.0, -1.0, -1.0]) @ bvh_root)
+    write_and_check(tmp_path, builtin_body, poses, fps=25.0)
+
+
+def test_bvh_rest_pose_before_any_pose_stands_upright(tmp_path, builtin_body):
+    path = tmp_path / "poses.bvh"
+    sink = BvhSink(path, builtin_body)
+    sink.frame(message(0, [], "no person yet"), None)
+    sink.close()
+    pos = own_positions(path, builtin_body.bone_names)[0]
+    heads = builtin_body.bone_heads * 100.0  # body frame is Y up, metres
+    np.testing.assert_allclose(pos, heads - heads[0], atol=1e-4)
+    head, pelvis = builtin_body.bone_names.index("head"), 0
+    assert pos[head, 1] > pos[pelvis, 1] + 40  # upright, cm
+
+
+@needs_assets
+def test_bvh_of_the_makehuman_body(tmp_path):
+    body = load_body(f"makehuman:{MAKEHUMAN}", "male")
+    write_and_check(tmp_path, body, camera_poses(body, "jumping_jacks", 6))
+
+
+# ---------------------------------------------------------------------------- folder and errors
+def test_open_recording_creates_the_files(tmp_path, builtin_body):
+    out = tmp_path / "run" / "replay"
+    sinks = open_recording(out, builtin_body, fps=15.0)
+    assert [type(s) for s in sinks] == [JsonlSink, CsvSink, BvhSink, OverlaySink]
+    for sink in sinks:
+        sink.frame(sample_messages()[0], None)
+        sink.close()
+    assert {p.name for p in out.iterdir()} == {"poses.jsonl", "poses.csv", "poses.bvh"}  # no frame: no video
+    assert read_bvh(out / "poses.bvh").frame_time == pytest.approx(1 / 15.0)
+    assert len(open_recording(tmp_path / "other", builtin_body, overlay=False)) == 3
+
+
+def test_unwritable_paths_raise_output_error(tmp_path, builtin_body):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("in the way")
+    target = blocker / "poses"
+    for make in (lambda: JsonlSink(target / "poses.jsonl"), lambda: CsvSink(target / "poses.csv"),
+                 lambda: BvhSink(target / "poses.bvh", builtin_body), lambda: OverlaySink(target / "overlay.mp4")):
+        with pytest.raises(OutputError, match=re.escape(str(target))):
+            make()
+    with pytest.raises(OutputError, match=re.escape(str(blocker))):
+        open_recording(blocker, builtin_body)
+    with pytest.raises(OutputError, match=re.escape(str(target))):
+        open_recording(target, builtin_body)

@@ -1,0 +1,244 @@
+"""The worker on zenoh: real sessions on 127.0.0.1 with multicast scouting off.
+
+A plain zenoh subscriber (zenoh's own API, not swarmpose.publish.client) receives the frames and
+validates them with jsonschema against the files in protocol/; liveliness appears while the
+worker runs and disappears after; the info queryable answers; the client API; endpoints that
+are malformed or unreachable.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import jsonschema
+import pytest
+import zenoh
+from conftest import REPO, free_port
+
+from swarmpose.body.loader import load_body
+from swarmpose.core.errors import PublishError
+from swarmpose.detect.registry import make_detector
+from swarmpose.pipeline.status import HealthFileSink
+from swarmpose.pipeline.step import FramePipeline
+from swarmpose.pipeline.worker import Worker
+from swarmpose.publish.client import Client
+from swarmpose.publish.zenoh_link import ZenohSink
+from swarmpose.sources.registry import open_source
+from swarmpose.tracking.body_tracker import BodyTracker
+from swarmpose.tracking.config import TrackerConfig
+
+SCHEMAS = {name: json.loads((REPO / "protocol" / f"{name}.schema.json").read_text())
+           for name in ("frame", "status", "info")}
+
+
+def plain_session(connect: str | None = None, listen: str | None = None, mode: str = "peer") -> zenoh.Session:
+    config = zenoh.Config()
+    config.insert_json5("mode", json.dumps(mode))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    if connect:
+        config.insert_json5("connect/endpoints", json.dumps([connect]))
+    if listen:
+        config.insert_json5("listen/endpoints", json.dumps([listen]))
+    return zenoh.open(config)
+
+
+def wait_until(predicate, timeout: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.05)
+    return False
+
+
+@pytest.fixture(scope="module")
+def body():
+    return load_body("builtin")
+
+
+def worker_on(sequence, body, sink, *more_sinks, **kw) -> Worker:
+    uri = f"folder:{sequence}"
+    source = open_source(uri)
+    pipeline = FramePipeline(make_detector("simulated", source),
+                             lambda intr: BodyTracker(body, intr, TrackerConfig(mode="lift")))
+    return Worker(lambda: open_source(uri), pipeline, [sink, *more_sinks], camera="cam0",
+                  drop_stale=False, source_uri=uri, detector_spec="simulated", status_period_s=0.2, source=source,
+                  zenoh_state=sink.state, **kw)
+
+
+def test_a_plain_zenoh_subscriber_gets_valid_frames_status_info_and_liveliness(wave_sequence, body):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    holder = {}
+    sink = ZenohSink("cam0", lambda: holder["info"](), listen=[endpoint], multicast=False)
+    sub = plain_session(connect=endpoint)
+    frames, statuses, alive = [], [], []
+    sub.declare_subscriber("swarmpose/cam0/frame", lambda s: frames.append((s.payload.to_bytes(), str(s.encoding))))
+    sub.declare_subscriber("swarmpose/cam0/status", lambda s: statuses.append(json.loads(s.payload.to_bytes())))
+    sub.liveliness().declare_subscriber("swarmpose/*/alive", lambda s: alive.append((str(s.key_expr), str(s.kind))),
+                                        history=True)
+    try:
+        assert wait_until(lambda: sink.state()["peers"] == 1 and alive)
+        assert alive == [("swarmpose/cam0/alive", "SampleKind.PUT")]
+        from swarmpose.messages import info_message
+
+        worker = worker_on(wave_sequence, body, sink)
+        holder["info"] = lambda: info_message("cam0", intrinsics=worker.intrinsics, body=body, source=worker.source_uri)
+        time.sleep(0.3)
+        gate = threading.Event()
+        # query the info while the worker runs (its intrinsics are known after the first frame)
+        runner = threading.Thread(target=lambda: (worker.run(), gate.set()))
+        runner.start()
+        assert wait_until(lambda: len(frames) >= 1)
+        replies = [r.ok for r in sub.get("swarmpose/cam0/info", timeout=5.0) if r.ok is not None]
+        runner.join(60)
+        assert gate.is_set()
+        assert len(replies) == 1
+        info = json.loads(replies[0].payload.to_bytes())
+        jsonschema.validate(info, SCHEMAS["info"])
+        assert info["intrinsics"]["width"] == 640 and info["skeleton"]["joints"][0] == "head"
+        assert wait_until(lambda: len(frames) == 6)
+        decoded = [json.loads(p) for p, _ in frames]
+        for message in decoded:
+            jsonschema.validate(message, SCHEMAS["frame"])
+        assert [m["frame"] for m in decoded] == list(range(6))
+        assert all(enc.startswith("application/json") for _, enc in frames)
+        assert wait_until(lambda: statuses and statuses[-1]["state"] == "source-ended")
+        for status in statuses:
+            jsonschema.validate(status, SCHEMAS["status"])
+        assert statuses[-1]["zenoh"]["peers"] == 1 and statuses[-1]["zenoh"]["listen"] == [endpoint]
+        # the worker closed its sinks: the token is withdrawn
+        assert wait_until(lambda: ("swarmpose/cam0/alive", "SampleKind.DELETE") in alive)
+    finally:
+        sink.close()
+        sub.close()
+
+
+def test_the_client_api_delivers_by_iterator_and_callback(wave_sequence, body):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    sink = ZenohSink("cam0", lambda: {"schema": "swarmpose.info"}, listen=[endpoint], multicast=False)
+    try:
+        with Client("cam0", connect=[endpoint], multicast=False) as client:
+            got = []
+            client.on_frame(got.append)
+            assert wait_until(lambda: sink.state()["peers"] == 1)
+            assert client.alive() == ["cam0"]
+            # a worker answering with an invalid info message is rejected, not passed on
+            assert client.info(timeout=2.0) == [] and client.rejected == 1 and "swarmpose.info" in client.last_error
+            time.sleep(1.0)
+            runner = threading.Thread(target=worker_on(wave_sequence, body, sink).run)
+            runner.start()
+            frames = list(client.frames(timeout=30, count=6))
+            runner.join(60)
+            assert [f["frame"] for f in frames] == list(range(6)) and wait_until(lambda: len(got) == 6)
+            assert client.rejected == 1
+            assert wait_until(lambda: client.alive() == [])     # the worker closed its sink at the end
+    finally:
+        sink.close()
+
+
+def test_a_client_rejects_a_message_that_breaks_the_schema():
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    pub = plain_session(listen=endpoint)
+    try:
+        with Client("cam9", connect=[endpoint], multicast=False) as client:
+            assert wait_until(lambda: len(list(pub.info.peers_zid())) == 1)
+            time.sleep(1.0)
+            pub.put("swarmpose/cam9/frame", json.dumps({"schema": "swarmpose.frame", "version": 1, "camera": "cam9"}))
+            pub.put("swarmpose/cam9/frame", b"not json")
+            assert wait_until(lambda: client.rejected == 2)
+            assert list(client.frames(timeout=0.3)) == []
+    finally:
+        pub.close()
+
+
+def test_malformed_endpoints_fail_at_once_with_the_value():
+    with pytest.raises(PublishError, match="--connect.*foo"):
+        ZenohSink("cam0", dict, connect=["foo"], multicast=False)
+    taken = f"tcp/127.0.0.1:{free_port()}"
+    holder = plain_session(listen=taken)
+    try:
+        with pytest.raises(PublishError, match="Address already in use"):
+            ZenohSink("cam0", dict, listen=[taken], multicast=False)
+    finally:
+        holder.close()
+
+
+def test_an_unreachable_router_is_reported_and_the_worker_goes_on(wave_sequence, body, tmp_path):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    health = tmp_path / "status.json"
+    sink = ZenohSink("cam0", dict, mode="client", connect=[endpoint], multicast=False, retry_s=0.3)
+    worker = worker_on(wave_sequence, body, sink, HealthFileSink(health))
+    worker.run()                                    # runs to the end without a router
+    assert worker.stats.published == 6 and sink.unsent >= 6
+    warning = json.loads(health.read_text())["zenoh"]["warning"]
+    assert "Unable to connect" in warning and "retrying every 0.3 s" in warning and endpoint in warning
+
+
+def test_a_router_that_comes_later_is_connected_by_the_retry():
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    sink = ZenohSink("cam0", dict, mode="client", connect=[endpoint], multicast=False, retry_s=0.3)
+    try:
+        assert "Unable to connect" in sink.state()["warning"]
+        router = plain_session(listen=endpoint, mode="router")
+        try:
+            got = []
+            router.declare_subscriber("swarmpose/cam0/frame", lambda s: got.append(json.loads(s.payload.to_bytes())))
+            deadline = time.monotonic() + 10
+            n = 0
+            while not got and time.monotonic() < deadline:
+                n += 1
+                sink.frame({"frame": n}, None)      # each publish attempt retries the session when due
+                time.sleep(0.2)
+            assert got and sink.state()["routers"] == 1 and sink.state()["warning"] == ""
+        finally:
+            router.close()
+    finally:
+        sink.close()
+
+
+def test_peer_mode_with_an_unreachable_connect_endpoint_warns():
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    sink = ZenohSink("cam0", dict, connect=[endpoint], multicast=False)
+    try:
+        assert "no --connect endpoint reachable yet" in sink.state()["warning"]
+    finally:
+        sink.close()
+
+
+def test_serve_configured_by_environment_publishes_and_stops_on_sigterm(wave_sequence, tmp_path):
+    """The docker entry point (`swarmpose serve`, settings from SWARMPOSE_*), run outside docker."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    health = tmp_path / "status.json"
+    env = {"PATH": str(Path(sys.executable).parent), "HOME": str(tmp_path), "SWARMPOSE_SOURCE": str(wave_sequence),
+           "SWARMPOSE_CAMERA_ID": "envcam", "SWARMPOSE_LISTEN": endpoint, "SWARMPOSE_MULTICAST": "false",
+           "SWARMPOSE_MODE": "lift", "SWARMPOSE_RATE": "5", "SWARMPOSE_LOOP": "true",
+           "SWARMPOSE_HEALTH_FILE": str(health), "SWARMPOSE_STATUS_PERIOD_S": "0.5"}
+    proc = subprocess.Popen([str(Path(sys.executable).parent / "swarmpose"), "serve"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    sub = plain_session(connect=endpoint)
+    frames, alive = [], []
+    sub.declare_subscriber("swarmpose/envcam/frame", lambda s: frames.append(json.loads(s.payload.to_bytes())))
+    sub.liveliness().declare_subscriber("swarmpose/envcam/alive", lambda s: alive.append(str(s.kind)), history=True)
+    try:
+        assert wait_until(lambda: len(frames) >= 8, timeout=60), proc.stderr.read() if proc.poll() else "no frames"
+        for message in frames:
+            jsonschema.validate(message, SCHEMAS["frame"])
+        assert {m["camera"] for m in frames} == {"envcam"}
+        numbers = [m["frame"] for m in frames]
+        assert any(b < a for a, b in zip(numbers, numbers[1:])), numbers     # --loop started the recording over
+        healthy = subprocess.run([str(Path(sys.executable).parent / "swarmpose"), "health"], env=env,
+                                 capture_output=True, text=True, timeout=60)
+        assert healthy.returncode == 0 and healthy.stdout.startswith("healthy: running")
+        proc.terminate()
+        assert proc.wait(timeout=30) == 0
+        assert wait_until(lambda: "SampleKind.DELETE" in alive)
+        assert json.loads(health.read_text())["state"] == "stopping"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        sub.close()

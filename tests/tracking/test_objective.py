@@ -1,0 +1,128 @@
+"""The objective's terms against independent computations: E_D against Open3D ray casting
+scored in float64 numpy, E_J2D / E_J3D by hand, lifting against rendered ground truth."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from swarmpose.body.loader import load_body
+from swarmpose.body.skeleton import COCO17, EVAL_JOINTS
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import ConfigError
+from swarmpose.detect.joints import Joints2D
+from swarmpose.gpu.reference import raycast_tiles, reference_score
+from swarmpose.gpu.scorer import ParticleScorer
+from swarmpose.gpu.tile import box_around
+from swarmpose.sim.render import Renderer, Room
+from swarmpose.tracking.init_pose import torso_pose
+from swarmpose.tracking.lift import JOINT_RADIUS, lift_keypoints
+from swarmpose.tracking.objective import JointTargets, Objective, ObjectiveWeights
+
+INTR = Intrinsics.kinect_v1()
+FACING = (0.0, 1.0, 0.0, 0.0)
+
+
+@pytest.fixture(scope="module")
+def body():
+    return load_body("builtin").tracking_lod(1500)
+
+
+@pytest.fixture(scope="module")
+def scene(body):
+    """A person 3 m away in a room: true pose (36,), depth (480, 640) m."""
+    h = body.rest_pose((0.1, 0.1, 3.0), FACING)
+    room = Room(floor_point=np.array([0.0, 1.0, 0.0]), floor_normal=np.array([0.0, -1.0, 0.0]),
+                wall_point=np.array([0.0, 0.0, 4.5]), wall_normal=np.array([0.0, 0.0, -1.0]))
+    depth = Renderer(INTR).render(body.pose(h[None])[0], body.triangles, room)[0].astype(np.float32)
+    return h, depth
+
+
+def detection_of(body, h: np.ndarray, shift_px=(0.0, 0.0)) -> Joints2D:
+    pts = INTR.project(body.posed_points(h[None], COCO17.points)[0]) + np.asarray(shift_px)
+    return Joints2D(COCO17, np.column_stack([pts, np.ones(len(pts))]), 0, 0)
+
+
+def test_lift_on_a_plane_by_hand():
+    depth = np.full((INTR.height, INTR.width), 2.0, np.float32)
+    out = lift_keypoints(depth, INTR, {"left_knee": (400.0, 300.0, 1.0), "nose": (100.0, 50.0, 0.9)})
+    ray = np.array([(400 - INTR.cx) / INTR.fx, (300 - INTR.cy) / INTR.fy, 1.0])
+    assert np.allclose(out["left_knee"], 2.0 * ray + JOINT_RADIUS["left_knee"] * ray / np.linalg.norm(ray))
+    assert np.allclose(out["nose"], 2.0 * np.array([(100 - INTR.cx) / INTR.fx, (50 - INTR.cy) / INTR.fy, 1.0]))
+
+
+def test_lift_matches_rendered_truth_and_drops_background(body, scene):
+    h, depth = scene
+    det = detection_of(body, h)
+    lifted = lift_keypoints(depth, INTR, {p: tuple(r) for p, r in zip(COCO17.points, det.keypoints)})
+    truth = body.posed_points(h[None], COCO17.points)[0]
+    err = np.array([np.linalg.norm(lifted[p] - t) for p, t in zip(COCO17.points, truth)])
+    assert np.nanmedian(err) < 0.04, err
+    lifted = lift_keypoints(depth, INTR, {"left_knee": tuple(det.keypoints[13]), "right_knee": tuple(det.keypoints[14]),
+                                          "left_hip": tuple(det.keypoints[11]), "left_wrist": (600.0, 100.0, 1.0)})
+    assert np.all(np.isnan(lifted["left_wrist"])), "a keypoint on the wall 1.5 m behind must not lift"
+    assert np.all(np.isfinite(lifted["left_knee"]))
+
+
+def test_depth_term_matches_open3d_and_numpy(body, scene):
+    h, depth = scene
+    scorer = ParticleScorer(body, INTR, (64, 64))
+    objective = Objective(body, INTR, scorer, ObjectiveWeights(depth=1.0, joints=0.0))
+    box = box_around(INTR.project(body.pose(h[None])[0]), margin=0.15)
+    targets = JointTargets.from_detection(detection_of(body, h), depth, INTR, body)
+    objective.set_frame(depth, box, targets, h)
+    rng = np.random.default_rng()
+    hs = np.repeat(h[None], 6, axis=0)
+    hs[1:, 7:] += rng.normal(0, 0.3, (5, 29))
+    hs[1:, :3] += rng.normal(0, 0.05, (5, 3))
+    e = objective(hs)
+    tiles = raycast_tiles(body.pose(hs), body.triangles, scorer.tile_box.rays(INTR))
+    sums, counts = reference_score(tiles, scorer.observed, 0.3)
+    n_p = max(counts["close"][0], 0.1 * counts["observed"][0], 1.0)
+    assert objective.normaliser == n_p
+    assert np.allclose(e, 100 * sums / n_p, rtol=1e-3)
+    assert np.argmin(e) == 0, "the true pose explains the depth best"
+
+
+def test_joint_terms_by_hand(body, scene):
+    h, depth = scene
+    scorer = ParticleScorer(body, INTR, (32, 32))
+    objective = Objective(body, INTR, scorer, ObjectiveWeights(depth=0.0, joints=1.0, alpha=0.97))
+    det = detection_of(body, h, shift_px=(3.0, 4.0))  # every keypoint 5 px off
+    targets = JointTargets.from_detection(det, depth, INTR, body)
+    objective.set_frame(depth, (100, 50, 400, 400), targets, h)
+    e = objective(h[None])
+    assert objective.last_parts["E_J2D"][0] == pytest.approx(5.0, abs=1e-6)
+    truth = body.posed_points(h[None], targets.names)[0]
+    d3 = np.linalg.norm(truth - targets.xyz, axis=1)
+    ok = np.isfinite(d3)
+    expected_3d = 1000 * np.sum(d3[ok] * targets.weight[ok]) / targets.weight[ok].sum()
+    assert objective.last_parts["E_J3D"][0] == pytest.approx(expected_3d, rel=1e-9)
+    assert e[0] == pytest.approx(0.97 * 5.0 + 0.03 * expected_3d)
+    assert targets.weight[targets.names.index("left_hip")] == 0.2
+    assert targets.weight[targets.names.index("left_wrist")] == 1.8
+    low = Joints2D(COCO17, np.column_stack([det.keypoints[:, :2], np.full(17, 0.1)]), 0, 0)
+    assert JointTargets.from_detection(low, depth, INTR, body).count == 0, "low scores drop out"
+
+
+def test_torso_pose_recovers_root(body):
+    rng = np.random.default_rng()
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    h = body.rest_pose((0.2, -0.1, 2.5), q)
+    pts = body.posed_points(h[None], ("left_hip", "right_hip", "left_shoulder", "right_shoulder"))[0]
+    lifted = dict(zip(("left_hip", "right_hip", "left_shoulder", "right_shoulder"), pts))
+    est = torso_pose(body, lifted, body.rest_angles)
+    got = body.posed_points(est[None], EVAL_JOINTS)[0]
+    want = body.posed_points(h[None], EVAL_JOINTS)[0]
+    assert np.max(np.linalg.norm(got - want, axis=1)) < 0.03
+    assert torso_pose(body, {"left_hip": pts[0]}, body.rest_angles) is None
+
+
+def test_bad_weights():
+    with pytest.raises(ConfigError):
+        ObjectiveWeights(depth=0.0, joints=0.0)
+    with pytest.raises(ConfigError):
+        ObjectiveWeights(alpha=1.5)
+    with pytest.raises(ConfigError):
+        ObjectiveWeights(depth=float("nan"))

@@ -1,0 +1,115 @@
+"""The tracker on a synthetic sequence against its ground truth, its modes, and bad input."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from swarmpose.body.loader import load_body
+from swarmpose.body.skeleton import LAYOUTS
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import ConfigError, TrackingError
+from swarmpose.detect.joints import Joints2D
+from swarmpose.messages import validate
+from swarmpose.motion.builtin import builtin_motion
+from swarmpose.sim.synth import SynthConfig, synthesize
+from swarmpose.sources.base import Frame
+from swarmpose.sources.groundtruth import load_ground_truth
+from swarmpose.tracking.body_tracker import BodyTracker
+from swarmpose.tracking.config import TrackerConfig
+from swarmpose.tracking.result import FrameResult
+
+FRAMES = 6
+SMALL = {"particles": 24, "generations": 24}
+
+
+@pytest.fixture(scope="module")
+def body():
+    return load_body("builtin")
+
+
+@pytest.fixture(scope="module")
+def sequence(tmp_path_factory, body) -> Path:
+    out = tmp_path_factory.mktemp("walk")
+    config = SynthConfig(frames=FRAMES, fps=15.0, seed=4)
+    synthesize(body, builtin_motion("walk", FRAMES, config.fps), out, config, progress=False)
+    return out
+
+
+def frames_of(folder: Path):
+    """(Frame, Joints2D) pairs read straight from the files (cv2), independent of the sources."""
+    intr = Intrinsics.load(folder / "intrinsic.json")
+    gt = load_ground_truth(folder)
+    for row, f in enumerate(gt.frames):
+        depth = cv2.imread(str(folder / "depth" / f"{f:06d}.png"), cv2.IMREAD_UNCHANGED).astype(np.float32) / 1000
+        layout, kp = gt.detections[row]
+        yield Frame(f, f * 66_666_667, depth, None, intr), Joints2D(LAYOUTS[layout], kp, f, 0)
+
+
+def track(body, folder: Path, **config):
+    intr = Intrinsics.load(folder / "intrinsic.json")
+    tracker = BodyTracker(body, intr, TrackerConfig(**{**SMALL, **config}))
+    return [tracker.step(frame, det) for frame, det in frames_of(folder)]
+
+
+def errors_mm(results, folder: Path) -> np.ndarray:
+    gt = load_ground_truth(folder)
+    return 1000 * np.linalg.norm(np.array([r.joints3d for r in results]) - gt.joints3d, axis=2)
+
+
+def test_hybrid_tracks_the_walk_without_initialisation(body, sequence):
+    results = track(body, sequence)
+    assert [r.state for r in results] == ["init"] + ["tracking"] * (FRAMES - 1)
+    err = errors_mm(results, sequence)
+    assert np.mean(err) < 60, np.round(np.mean(err, axis=0))
+    conf = np.array([r.confidence for r in results])
+    assert np.all((conf >= 0) & (conf <= 1)) and conf.mean() > 0.5
+    message = FrameResult(FRAMES - 1, 0, (results[-1],)).to_message("cam0")
+    line = json.dumps(message, allow_nan=False)
+    assert validate(json.loads(line))["bodies"][0]["state"] == "tracking"
+    assert set(results[-1].objective) == {"E", "E_D", "E_J", "E_J2D", "E_J3D"}
+
+
+def test_seeded_runs_repeat(body, sequence):
+    a = track(body, sequence, seed=3)[:2]
+    b = track(body, sequence, seed=3)[:2]
+    assert all(np.array_equal(x.pose, y.pose) for x, y in zip(a, b))
+
+
+def test_modes(body, sequence):
+    lift = track(body, sequence, mode="lift")
+    err = errors_mm(lift, sequence)
+    assert np.nanmedian(err) < 80 and np.isfinite(err).mean() > 0.8
+    assert all(r.pose is None for r in lift)
+    joints = track(body, sequence, mode="joints")
+    assert np.mean(errors_mm(joints, sequence)) < 90
+    assert all(r.objective["E_D"] == 0 for r in joints)
+    depth = track(body, sequence, mode="depth")
+    assert all(r.objective["E_J"] == 0 for r in depth[1:])
+    with pytest.raises(ConfigError):
+        TrackerConfig(mode="magic")
+
+
+def test_no_person_then_recovery(body, sequence):
+    intr = Intrinsics.load(sequence / "intrinsic.json")
+    tracker = BodyTracker(body, intr, TrackerConfig(**SMALL))
+    (frame, det), (frame1, det1) = list(frames_of(sequence))[:2]
+    empty = Frame(0, 0, np.zeros_like(frame.depth), None, intr)
+    r = tracker.step(empty, None)
+    assert r.state == "lost" and "no person" in r.reason and r.pose is None
+    none = Joints2D(det.layout, np.zeros_like(det.keypoints), 0, 0)
+    r = tracker.step(frame, none)
+    assert r.state == "lost" and r.pose is None
+    r = tracker.step(frame, det)
+    assert r.state == "init"
+    r = tracker.step(frame1, none)  # all joints missing: depth alone carries the track
+    assert r.state == "tracking" and "depth only" in r.reason
+    nan_depth = Frame(2, 0, np.full_like(frame.depth, np.nan), None, intr)
+    r = tracker.step(nan_depth, none)
+    assert r.state == "lost" and r.reason
+    with pytest.raises(TrackingError):
+        tracker.step(Frame(3, 0, np.zeros((10, 10), np.float32), None, intr), det)
