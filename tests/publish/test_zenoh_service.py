@@ -61,6 +61,26 @@ def body():
     return load_body("builtin")
 
 
+class HoldAtFrame:
+    """A sink that blocks the worker at frame ``index`` until ``release`` is set (at most 20 s)."""
+
+    def __init__(self, index: int, release: threading.Event):
+        self.index, self.release = index, release
+        self.holding = threading.Event()
+        self.timed_out = False
+
+    def frame(self, message: dict, frame) -> None:
+        if message["frame"] == self.index:
+            self.holding.set()
+            self.timed_out = not self.release.wait(20)
+
+    def status(self, message: dict) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
 def worker_on(sequence, body, sink, *more_sinks, **kw) -> Worker:
     uri = f"folder:{sequence}"
     source = open_source(uri)
@@ -86,17 +106,25 @@ def test_a_plain_zenoh_subscriber_gets_valid_frames_status_info_and_liveliness(w
         assert alive == [("swarmpose/cam0/alive", "SampleKind.PUT")]
         from swarmpose.messages import info_message
 
-        worker = worker_on(wave_sequence, body, sink)
+        # The query must reach the worker while it runs: a finished worker closes its sinks and
+        # withdraws the queryable (the 6 frames take well under the time a subscriber needs to
+        # notice the first one, which made this test flaky). A sink after zenoh holds the worker at
+        # its second frame until the query has been answered.
+        answered = threading.Event()
+        holder_sink = HoldAtFrame(1, answered)
+        worker = worker_on(wave_sequence, body, sink, holder_sink)
         holder["info"] = lambda: info_message("cam0", intrinsics=worker.intrinsics, body=body, source=worker.source_uri)
         time.sleep(0.3)
         gate = threading.Event()
-        # query the info while the worker runs (its intrinsics are known after the first frame)
         runner = threading.Thread(target=lambda: (worker.run(), gate.set()))
         runner.start()
         assert wait_until(lambda: len(frames) >= 1)
+        assert not gate.is_set() and holder_sink.holding.wait(10)
+        # its intrinsics are known after the first frame
         replies = [r.ok for r in sub.get("swarmpose/cam0/info", timeout=5.0) if r.ok is not None]
+        answered.set()
         runner.join(60)
-        assert gate.is_set()
+        assert gate.is_set() and not holder_sink.timed_out
         assert len(replies) == 1
         info = json.loads(replies[0].payload.to_bytes())
         jsonschema.validate(info, SCHEMAS["info"])
