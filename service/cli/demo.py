@@ -7,6 +7,9 @@
    first poses it receives;
 4. print Δ and A(t) against the ground truth, fps, latency and where the outputs are.
 
+It exits 1 when the subscriber got fewer frames than it waited for or a replay file could not
+be written (the other outputs are kept).
+
 Every frame is tracked (replay hand-overs: none dropped), so Δ covers the whole sequence.
 """
 
@@ -102,7 +105,7 @@ def run_demo(sequence: Path, out: Path, particles: int, generations: int, quiet:
     print(f"the subscriber received {received} frames (exit status {proc.returncode})")
     print(format_summary(result))
     print(f"replay outputs in {out}/ (poses.jsonl: the frame messages; poses.csv; poses.bvh; overlay.mp4)")
-    return 0 if proc.returncode == 0 and received >= count else 1
+    return 0 if proc.returncode == 0 and received >= count and not worker.sink_errors else 1
 
 
 def cmd_demo(args: argparse.Namespace) -> int:

@@ -3,8 +3,10 @@
 ``serve`` runs the worker on a source and publishes over zenoh until the source ends (a
 recording; ``--loop`` starts it over) or SIGINT/SIGTERM (a live camera is reopened when it
 fails). ``replay`` runs the same pipeline over a recording as fast as it goes, without
-dropping frames, writing poses.jsonl / poses.csv / poses.bvh / overlay.mp4, and prints Δ
-and A(t) when the folder has ground truth. Settings: :mod:`swarmpose.cli.settings` (flags >
+dropping frames, writing poses.jsonl / poses.csv / poses.bvh / overlay.mp4 into ``--out``
+(so it takes no ``--loop`` or ``--record``), and prints Δ and A(t) when the folder has ground
+truth; it exits 1 when the recording broke or a file could not be written (what was written
+stays), 130 when SIGINT/SIGTERM stopped it. Settings: :mod:`swarmpose.cli.settings` (flags >
 ``SWARMPOSE_*`` > ``--config`` TOML > defaults).
 """
 
@@ -22,15 +24,19 @@ from swarmpose.cli.common import DEFAULTS, quiet
 from swarmpose.cli.settings import add_flags, load
 from swarmpose.cli.track import add_source_argument, settings_of
 from swarmpose.core.errors import ConfigError
+from swarmpose.core.settings import leaves
 from swarmpose.messages.schema import keys
 from swarmpose.pipeline.config import ServiceConfig
 from swarmpose.pipeline.service import build_worker, format_summary, run_summary
 from swarmpose.pipeline.worker import Worker
 
 REPLAY_DEFAULTS = {"zenoh_mode": "off"}
+REPLAY_SETTINGS = tuple(name for name in leaves(ServiceConfig) if name not in ("loop", "record"))
+"""The settings ``replay`` takes: it writes into ``--out`` and ends with the recording."""
+INTERRUPTED = 130
 
 
-def _stop_on_signals(worker: Worker, stack: ExitStack) -> None:
+def stop_on_signals(worker: Worker, stack: ExitStack) -> None:
     """SIGINT and SIGTERM stop ``worker``; ``stack`` puts the previous handlers back."""
     for sig in (signal.SIGINT, signal.SIGTERM):
         previous = signal.signal(sig, lambda *_: worker.stop())
@@ -42,7 +48,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     config = settings_of(args)
     with ExitStack() as stack:
         worker, _, _ = build_worker(config, stack, replay=False)
-        _stop_on_signals(worker, stack)
+        stop_on_signals(worker, stack)
         z = config.zenoh
         where = f"zenoh {z.zenoh_mode}" + (f", connect {', '.join(z.connect)}" if z.connect else "") + (
             f", listen {', '.join(z.listen)}" if z.listen else "")
@@ -57,12 +63,23 @@ def cmd_replay(args: argparse.Namespace) -> int:
     config = settings_of(args, REPLAY_DEFAULTS)
     with ExitStack() as stack:
         worker, parts, _ = build_worker(config, stack, replay=True, out=args.out, progress=not quiet(args))
-        _stop_on_signals(worker, stack)
+        stop_on_signals(worker, stack)
         started = time.monotonic()
         stats = worker.run()
     result = run_summary(parts, stats, time.monotonic() - started, worker)
     print(json.dumps(result) if args.json else format_summary(result))
-    return 1 if worker.state in ("source-failed", "failed") else 0
+    return replay_status(worker)
+
+
+def replay_status(worker: Worker) -> int:
+    """The exit status of a replay: 1 when the source or the worker failed, 130 when a signal
+    stopped it, 1 when a sink failed (what the others wrote stays), else 0."""
+    if worker.state in ("source-failed", "failed"):
+        return 1
+    if worker.state == "stopping":
+        print("swarmpose replay: interrupted; the outputs hold the frames tracked so far", file=sys.stderr)
+        return INTERRUPTED
+    return 1 if worker.sink_errors else 0
 
 
 def cmd_health(args: argparse.Namespace) -> int:
@@ -96,10 +113,10 @@ def cmd_health(args: argparse.Namespace) -> int:
 
 
 def _service_parser(sub: argparse._SubParsersAction, common: argparse.ArgumentParser, name: str, text: str,
-                    defaults: dict | None = None) -> argparse.ArgumentParser:
+                    defaults: dict | None = None, only: tuple[str, ...] | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser(name, parents=[common], formatter_class=DEFAULTS, help=text)
     add_source_argument(p)
-    add_flags(p, ServiceConfig, defaults=defaults)
+    add_flags(p, ServiceConfig, only, defaults=defaults)
     p.add_argument("--config", dest="config_file", default=None, help="TOML file of settings ($SWARMPOSE_CONFIG)")
     return p
 
@@ -110,7 +127,7 @@ def add_service_commands(sub: argparse._SubParsersAction, common: argparse.Argum
     p.set_defaults(func=cmd_serve)
 
     p = _service_parser(sub, common, "replay", "track a recording into poses.jsonl/csv/bvh + overlay.mp4 (Δ, A(t) "
-                                               "with ground truth)", REPLAY_DEFAULTS)
+                                               "with ground truth)", REPLAY_DEFAULTS, REPLAY_SETTINGS)
     p.add_argument("--out", required=True, help="output folder (created)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_replay)

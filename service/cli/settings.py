@@ -1,8 +1,9 @@
 """Settings from the command line, the environment and a TOML file, in layers.
 
 Later layers win: the defaults (the dataclass', then a command's own) < a TOML file
-(``--config FILE`` or ``$SWARMPOSE_CONFIG``; keys are setting names, at the top level, in a
-``[swarmpose]`` table or in section tables such as ``[tracker]`` and ``[zenoh]``) <
+(``--config FILE`` or ``$SWARMPOSE_CONFIG``; keys are setting names, at the top level and in a
+``[swarmpose]`` table, each with section tables such as ``[tracker]`` and ``[zenoh]``; a
+setting given twice is an error) <
 environment variables ``SWARMPOSE_<NAME>`` < flags. Flags are generated from the settings'
 declarations (:mod:`swarmpose.core.settings`), each showing its default; a wrong value
 anywhere raises :class:`~swarmpose.core.errors.ConfigError` naming the setting, where it
@@ -71,8 +72,38 @@ def add_flags(parser: argparse.ArgumentParser, cls: type, only: Iterable[str] | 
                                choices=meta["choices"] or None, metavar=None if meta["choices"] else name.upper())
 
 
+def _belongs(path: tuple[str, ...], top: str) -> str:
+    """Where a setting with section ``path`` goes in a file whose settings table is ``top``."""
+    if not path:
+        return "at the top level" if not top else f"directly in [{top}]"
+    return f"in [{'.'.join((top, *path) if top else path)}]"
+
+
+def _entries(path: Path, cls: type, data: dict, top: str) -> list[tuple[str, Any, str]]:
+    """(key, value, where) of every setting of ``data`` (the top level, or the ``[top]`` table)
+    with its section tables opened; ConfigError for a key in a section table not its own."""
+    known, alias = leaves(cls), aliases(cls)
+    sections = {f.name for f in fields(cls) if "section" in f.metadata}
+    here = "at the top level" if not top else f"in [{top}]"
+    out: list[tuple[str, Any, str]] = []
+    for key, value in data.items():
+        if key not in sections or not isinstance(value, dict):
+            out.append((key, value, here))
+            continue
+        table = f"{top}.{key}" if top else key
+        for sub, sub_value in value.items():
+            name = alias.get(sub.replace("-", "_"), sub.replace("-", "_"))
+            if name in known and known[name][0][:1] != (key,):
+                raise ConfigError(f"config file {path}: key {sub!r} in table [{table}] is not a {key} setting; "
+                                  f"it belongs {_belongs(known[name][0], top)}")
+            out.append((sub, sub_value, f"in [{table}]"))
+    return out
+
+
 def read_toml(path: str | Path, cls: type) -> dict:
-    """The settings of a TOML file: top level, a ``[swarmpose]`` table and section tables."""
+    """The settings of a TOML file: its top level and a ``[swarmpose]`` table, each with section
+    tables (``[tracker]``, ``[swarmpose.zenoh]``, ...). ConfigError naming the file for an
+    unknown key, a setting given twice or a key in a section table it does not belong to."""
     path = Path(path).expanduser()
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -82,21 +113,21 @@ def read_toml(path: str | Path, cls: type) -> dict:
         raise ConfigError(f"config file {path} cannot be read: {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"config file {path} is not valid TOML: {exc}") from None
-    data = data.get("swarmpose", data)
+    inner = data.pop("swarmpose", {})
+    if not isinstance(inner, dict):
+        raise ConfigError(f"config file {path}: swarmpose must be a table ([swarmpose]), got {inner!r}")
     known, alias = leaves(cls), aliases(cls)
-    sections = {f.name for f in fields(cls) if "section" in f.metadata}
-    flat: dict[str, Any] = {}
-    for key, value in data.items():
-        if key in sections and isinstance(value, dict):
-            flat.update(value)
-        else:
-            flat[key] = value
-    settings = {}
-    for key, value in flat.items():
+    settings: dict[str, Any] = {}
+    given: dict[str, str] = {}
+    for key, value, where in _entries(path, cls, data, "") + _entries(path, cls, inner, "swarmpose"):
         name = key.replace("-", "_")
         name = alias.get(name, name)
         if name not in known:
             raise ConfigError(f"config file {path}: unknown key {key!r}; keys are {', '.join(sorted(known))}")
+        if name in given:
+            raise ConfigError(f"config file {path}: {name} is given twice ({given[name]} and {key!r} {where}); "
+                              "keep one")
+        given[name] = f"{key!r} {where}"
         settings[name] = convert(name, known[name][1].metadata["kind"], value, f"config file {path}")
     return settings
 

@@ -2,7 +2,10 @@
 
 Both run the sequential pipeline (:mod:`swarmpose.pipeline.run`): one thread, every frame.
 ``--out DIR`` gets the same files as ``replay`` (``poses.jsonl`` of frame messages,
-``poses.csv``, ``poses.bvh``, ``overlay.mp4`` unless ``--no-overlay``).
+``poses.csv``, ``poses.bvh``, ``overlay.mp4`` unless ``--no-overlay``). Exit status 1 when
+an output file could not be written or the source broke off (a truncated recording, a camera
+that vanished: a warning names it); what was tracked until then is written and reported.
+``eval`` refuses a source without ground truth at once (exit status 2).
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ def run_tracking(args: argparse.Namespace, *, score: bool) -> tuple[ServiceConfi
     """Open the parts of the command's settings, track every frame into ``--out``."""
     config = settings_of(args)
     with ExitStack() as stack:
-        parts = open_parts(config, stack, out=args.out or "", score=score)
+        parts = open_parts(config, stack, out=args.out or "", score=score, need_ground_truth=score)
         summary = run_sequence(parts.source, parts.pipeline, parts.sinks, camera=config.camera_id,
                                frames=config.frames, progress=not quiet(args))
     return config, parts, summary
@@ -56,21 +59,20 @@ def cmd_track(args: argparse.Namespace) -> int:
     _, parts, run = run_tracking(args, score=False)
     states = ", ".join(f"{k} {v}" for k, v in sorted(run.states.items()))
     print(f"tracked {run.frames} frames ({states}) at {run.fps:.2f} frames/s; poses in {args.out}/poses.jsonl")
-    return 0 if not run.sink_errors else 1
+    return 1 if run.sink_errors or run.source_error else 0
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
     """Track a synthetic sequence and report Δ and A(t) against its ground truth."""
     config, parts, run = run_tracking(args, score=True)
-    if parts.score is None:
-        raise ConfigError(f"{config.source} has no groundtruth.jsonl; eval needs a sequence from `swarmpose synth`")
     accuracy = score_summary(parts) or {"mpjpe_mm": None, "coverage": 0.0, "A": {}, "per_joint_mm": []}
     t = config.tracker
     result = {**{k: accuracy[k] for k in ("mpjpe_mm", "A", "coverage")}, "fps": run.fps, "frames": run.frames,
               "states": run.states, "mode": t.mode, "detector": config.detector, "body": config.body,
               "shape": config.shape, "particles": t.particles, "generations": t.generations, "pso": t.pso,
               "depth_weight": t.depth_weight, "joints_weight": t.joints_weight, "seed": t.seed,
-              "per_joint_mm": dict(zip(EVAL_JOINTS, accuracy["per_joint_mm"]))}
+              "per_joint_mm": dict(zip(EVAL_JOINTS, accuracy["per_joint_mm"])), "source_error": run.source_error,
+              "sink_errors": run.sink_errors}
     if args.plot:
         plot_accuracy({t.mode: {int(k): v for k, v in accuracy["A"].items()}}, args.plot, title=config.source)
         result["plot"] = args.plot
@@ -79,7 +81,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     else:
         print(f"{config.source}: mode {t.mode}, {run.frames} frames at {run.fps:.2f} frames/s")
         print("\n".join("  " + line for line in format_accuracy(accuracy)))
-    return 0 if not run.sink_errors else 1
+    return 1 if run.sink_errors or run.source_error else 0
 
 
 def add_track_commands(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:

@@ -64,15 +64,29 @@ def default_of(f: Field) -> Any:
     return f.default if f.default is not MISSING else f.default_factory()  # type: ignore[misc]
 
 
+SIZE_MIN, SIZE_MAX = 8, 512
+"""The sides (pixels) a ``size`` setting (the depth tile) may have. The OpenCL scorer also refuses,
+naming its device, a tile that device's local memory cannot hold (4 bytes a pixel)."""
+
+
+def check_size(value: Any, name: str = "size") -> tuple[int, int]:
+    """``value`` as a (W, H) pair of whole pixels within SIZE_MIN..SIZE_MAX; ConfigError otherwise."""
+    if (not isinstance(value, tuple) or len(value) != 2
+            or not all(isinstance(v, int) and not isinstance(v, bool) for v in value)):
+        raise ConfigError(f"{name} must be WxH pixels, e.g. 64x64 or (64, 64); got {value!r}")
+    w, h = value
+    if not (SIZE_MIN <= w <= SIZE_MAX and SIZE_MIN <= h <= SIZE_MAX):
+        raise ConfigError(f"{name} sides must be within {SIZE_MIN}..{SIZE_MAX} pixels; got {w}x{h}")
+    return w, h
+
+
 def parse_size(text: str, name: str = "size") -> tuple[int, int]:
-    """``"64x48"`` -> ``(64, 48)`` (sides 8..512 px); ConfigError otherwise. The one WxH parser."""
+    """``"64x48"`` -> ``(64, 48)`` (sides SIZE_MIN..SIZE_MAX px); ConfigError otherwise. The one WxH parser."""
     try:
         w, h = (int(v) for v in str(text).lower().split("x"))
     except ValueError:
         raise ConfigError(f"{name} must be WxH pixels, e.g. 64x64; got {text!r}") from None
-    if not (8 <= w <= 512 and 8 <= h <= 512):
-        raise ConfigError(f"{name} sides must be within 8..512 pixels; got {text!r}")
-    return w, h
+    return check_size((w, h), name)
 
 
 def format_value(value: Any) -> str:
@@ -140,6 +154,8 @@ def check_settings(obj: Any) -> None:
         value, meta = getattr(obj, f.name), f.metadata
         if meta["choices"] and value not in meta["choices"]:
             raise ConfigError(f"{f.name} must be one of {', '.join(meta['choices'])}; got {value!r}")
+        if meta["kind"] == "size":
+            check_size(value, f.name)
         if meta["kind"] in ("int", "float", "float?") and value is not None:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise ConfigError(f"{f.name} must be a finite number; got {value!r}")
@@ -167,12 +183,15 @@ def build(cls: type[T], values: Mapping[str, Any]) -> T:
 
 
 def with_settings(config: T, **changes: Any) -> T:
-    """A copy of a settings object with leaf settings changed by name (sections included);
-    ConfigError for a name it does not have."""
+    """A copy of a settings object with leaf settings changed by name (sections included),
+    each value converted as a flag's, a variable's or a file's is (``"32x48"``, ``[32, 48]``);
+    ConfigError for a name it does not have or a value of the wrong type or out of range."""
     known = leaves(type(config))
     unknown = sorted(set(changes) - set(known))
     if unknown:
         raise ConfigError(f"unknown setting(s) {', '.join(unknown)}; settings are {', '.join(sorted(known))}")
+    changes = {name: convert(name, known[name][1].metadata["kind"], value, f"argument {name}")
+               for name, value in changes.items()}
     out = config
     for f in fields(config):
         sub = f.metadata.get("section")

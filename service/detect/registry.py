@@ -1,4 +1,4 @@
-"""``--joints SPEC`` -> a 2D joint detector.
+"""``--detector SPEC`` (older name ``--joints``) -> a 2D joint detector.
 
 Forms:
 
@@ -27,15 +27,15 @@ def _split_options(spec: str, rest: str, allowed: dict[str, type]) -> tuple[str,
     """``PATH?k=v&k=v`` -> (PATH, {k: typed v}); ConfigError for unknown keys or bad values."""
     path, _, query = rest.partition("?")
     if not path:
-        raise ConfigError(f"--joints {spec!r} names no file or folder; use one of: {', '.join(FORMS)}")
+        raise ConfigError(f"--detector {spec!r} names no file or folder; use one of: {', '.join(FORMS)}")
     options = {}
     for key, value in parse_qsl(query, keep_blank_values=True):
         if key not in allowed:
-            raise ConfigError(f"--joints {spec!r}: unknown option {key!r}; options are {sorted(allowed)}")
+            raise ConfigError(f"--detector {spec!r}: unknown option {key!r}; options are {sorted(allowed)}")
         try:
             options[key] = allowed[key](value)
         except ValueError:
-            raise ConfigError(f"--joints {spec!r}: option {key}={value!r} is not a {allowed[key].__name__}") from None
+            raise ConfigError(f"--detector {spec!r}: option {key}={value!r} is not a {allowed[key].__name__}") from None
     return path, options
 
 
@@ -61,4 +61,4 @@ def make_detector(spec: str, source=None) -> Detector:
 
         path, opts = _split_options(spec, spec[len("openpose-json:"):], {"layout": str})
         return OpenPoseJsonDetector(path, **opts)
-    raise ConfigError(f"unknown --joints {spec!r}; use one of: {', '.join(FORMS)}")
+    raise ConfigError(f"unknown --detector {spec!r}; use one of: {', '.join(FORMS)}")

@@ -102,7 +102,7 @@ def simulate_detections(layout: KeypointLayout, points: dict[str, np.ndarray], d
 
 
 class SimulatedDetector:
-    """The detector ``simulated``: replays the detections ``swarmpose synth`` recorded in ``groundtruth.jsonl``.
+    """``--detector simulated``: replays the detections ``swarmpose synth`` recorded in ``groundtruth.jsonl``.
 
     ground_truth: the sequence's :class:`~swarmpose.sources.groundtruth.GroundTruth` (a folder
     source's ``.ground_truth``). ``detect(frame)`` returns the keypoints (K, 3) x px, y px,
@@ -111,9 +111,9 @@ class SimulatedDetector:
 
     def __init__(self, ground_truth, source_name: str = "the source"):
         if ground_truth is None:
-            raise DetectorError(f"--joints simulated needs a `swarmpose synth` sequence folder with groundtruth.jsonl "
-                                f"as --source; {source_name} has no ground truth. Use onnx:MODEL or "
-                                "openpose-json:DIR for other sources")
+            raise DetectorError(f"--detector simulated needs a `swarmpose synth` sequence folder with "
+                                f"groundtruth.jsonl as --source; {source_name} has no ground truth. Use "
+                                "--detector onnx:MODEL.onnx or --detector openpose-json:DIR for other sources")
         layouts = {d[0] for d in ground_truth.detections if d is not None}
         if not layouts:
             raise DetectorError(f"the ground truth of {source_name} records no simulated detections; "

@@ -23,7 +23,7 @@ from swarmpose.core.errors import ConfigError, ShapeError
 from swarmpose.core.settings import with_settings
 from swarmpose.detect.joints import Detector
 from swarmpose.detect.registry import make_detector
-from swarmpose.pipeline.run import results
+from swarmpose.pipeline.run import results, source_error
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
 from swarmpose.sources.registry import open_source
@@ -41,9 +41,11 @@ class Tracker:
     ``"openpose-json:DIR"``, ``"simulated"``) or an object with ``detect(frame, box)``;
     a detector made from a spec is the tracker's and closed with it. intrinsics: the
     camera (needed by :meth:`track`; :meth:`track_frame` takes each frame's own). source:
-    the frame source, for the ``simulated`` detector (it replays the source's recorded
-    detections). config: a :class:`~swarmpose.tracking.config.TrackerConfig`; settings:
-    any of its fields by name (``particles=32``, ``mode="joints"``), over ``config``.
+    the frame source, needed by the ``simulated`` detector (it replays the recorded
+    detections of a ``swarmpose synth`` sequence). config: a
+    :class:`~swarmpose.tracking.config.TrackerConfig`; settings: any of its fields by name
+    (``particles=32``, ``mode="joints"``, ``tile="32x48"``), over ``config``, converted and
+    checked as flags are (ConfigError for a wrong type, NaN or a value out of range).
 
     The tracker feeds each frame's tracked joints back to the detector (where to look next)
     and restarts a track that fails. Use it as a context manager, or call :meth:`close`.
@@ -53,6 +55,11 @@ class Tracker:
                  intrinsics: Intrinsics | None = None, *, shape: str | None = None,
                  source: FrameSource | None = None, config: TrackerConfig | None = None, **settings: Any):
         self.config = with_settings(config or TrackerConfig(), **settings)
+        if isinstance(detector, str) and detector.strip() == "simulated" and source is None:
+            raise ConfigError("the simulated detector replays the detections a `swarmpose synth` sequence recorded, "
+                              "so it needs that sequence: pass source=swarmpose.open_source('folder:SEQ'), or a "
+                              "detector for other frames, e.g. detector='onnx:movenet.onnx' or "
+                              "detector='openpose-json:DIR'")
         if isinstance(body, SkinnedBody):
             if shape:
                 raise ConfigError("shape applies to a body spec string; a loaded body already has its shape")
@@ -117,11 +124,14 @@ def track(source: str | FrameSource, *, body: str | SkinnedBody = "builtin", det
     """Track every frame of ``source`` (a URI such as ``"folder:DIR"``, ``"mkv:FILE"``,
     ``"realsense:"``, or an open source), yielding a :class:`FrameResult` per frame; at most
     ``frames`` (0 = all). Other arguments as for :class:`Tracker`. The source (when opened
-    here) and the detector are closed when the iteration ends or is abandoned."""
+    here) and the detector are closed when the iteration ends or is abandoned. A source that
+    ends by failing (``status`` ``"error: …"``, e.g. a truncated recording) ends the iteration
+    after its last good frame with a warning on the ``swarmpose`` logger."""
     opened = open_source(source) if isinstance(source, str) else source
     try:
         with Tracker(body, detector, shape=shape, source=opened, **settings) as tracker:
             yield from results(opened, tracker.pipeline, frames)
+            source_error(opened)
     finally:
         if isinstance(source, str):
             opened.close()

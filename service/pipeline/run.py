@@ -3,7 +3,9 @@
 ``swarmpose track`` and ``eval``, and :func:`swarmpose.track`, use it. Each frame's
 result goes, as the protocol's frame message, to every sink (files, scoring, ...) before
 the next frame is read, so an interrupted run keeps everything it produced. A sink that
-fails is logged and dropped; the others go on.
+fails is logged and dropped; the others go on. A source that ends with ``status`` ``"error: …"``
+(a recording that breaks, a camera that vanishes) is logged as a warning and, in a
+:class:`RunSummary`, kept as ``source_error``.
 """
 
 from __future__ import annotations
@@ -20,17 +22,20 @@ from swarmpose.sources.base import Frame, SkippedFrame
 from swarmpose.tracking.result import FrameResult
 
 log = logging.getLogger(__name__)
+_END = object()
 
 
 @dataclass
 class RunSummary:
     """What a run went through: frames, counts per state (init / tracking / lost / skipped),
-    the wall time (s) of detection + tracking, and the errors of sinks that failed."""
+    the wall time (s) of detection + tracking, the errors of sinks that failed, and the
+    source's ``"error: …"`` status when it ended by failing ('' when it did not)."""
 
     frames: int = 0
     states: dict[str, int] = field(default_factory=dict)
     seconds: float = 0.0
     sink_errors: list[str] = field(default_factory=list)
+    source_error: str = ""
 
     @property
     def fps(self) -> float:
@@ -46,11 +51,14 @@ class RunSummary:
 
 def results(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline, frames: int = 0,
             summary: RunSummary | None = None) -> Iterator[FrameResult]:
-    """The result of every item of ``source`` (at most ``frames``; 0 = all), counted in ``summary``."""
+    """The result of every item of ``source`` (at most ``frames``; 0 = all), counted in ``summary``.
+    No item is read past the ``frames``-th."""
     summary = summary if summary is not None else RunSummary()
-    for item in source:
-        if frames and summary.frames >= frames:
-            break
+    items = iter(source)
+    while not (frames and summary.frames >= frames):
+        item = next(items, _END)
+        if item is _END:
+            return
         t0 = time.perf_counter()
         result = pipeline.process(item)
         summary.count(result, 0.0 if result.skipped else time.perf_counter() - t0)
@@ -78,6 +86,7 @@ def run_sequence(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline
                         summary.sink_errors.append(what)
                         live.remove(sink)
                 bar.update(1)
+        summary.source_error = source_error(source)
     finally:
         for sink in sinks:
             try:
@@ -85,6 +94,16 @@ def run_sequence(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline
             except Exception as exc:  # report, close the others
                 log.error("closing %s: %s", type(sink).__name__, describe_error(exc))
     return summary
+
+
+def source_error(source: object) -> str:
+    """The ``"error: …"`` status a source ended with, logged as a warning naming it; '' otherwise."""
+    status = str(getattr(source, "status", "") or "")
+    if not status.startswith("error"):
+        return ""
+    log.warning("source %s ended with an error: %s", getattr(source, "uri", "") or type(source).__name__,
+                status.removeprefix("error:").strip())
+    return status
 
 
 def _remember(source: Iterable[Frame | SkippedFrame], frames_of: dict) -> Iterator[Frame | SkippedFrame]:

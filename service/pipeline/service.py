@@ -15,6 +15,7 @@ from pathlib import Path
 
 from swarmpose.body.loader import load_body
 from swarmpose.body.skinned import SkinnedBody
+from swarmpose.core.errors import ConfigError
 from swarmpose.core.progress import progress_bar
 from swarmpose.detect.joints import Detector
 from swarmpose.detect.registry import make_detector
@@ -58,15 +59,21 @@ def make_pipeline(body: SkinnedBody, detector: Detector, config: ServiceConfig) 
     return FramePipeline(detector, lambda intrinsics: BodyTracker(body, intrinsics, config.tracker))
 
 
-def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score: bool = True) -> Parts:
+def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score: bool = True,
+               need_ground_truth: bool = False) -> Parts:
     """Open the source, detector and body of ``config`` (closed by ``stack``); with ``out``,
-    the replay files there; with ``score`` and a source that has ground truth, a scorer."""
+    the replay files there; with ``score`` and a source that has ground truth, a scorer.
+    need_ground_truth: ConfigError at once (before any file is written) for a source without."""
     config.require_source()
     body = load_body(config.body, config.shape or None)
     source = open_source(config.source)
     stack.callback(source.close)
     detector = make_detector(config.detector, source)
     stack.callback(detector.close)
+    ground_truth = getattr(source, "ground_truth", None)
+    if need_ground_truth and ground_truth is None:
+        raise ConfigError(f"{config.source} has no ground truth (groundtruth.jsonl): eval needs a sequence folder "
+                          "written by `swarmpose synth`; use `swarmpose track` for other sources")
     triangles = config.tracker.triangles
     tracking_body = body if len(body.triangles) <= triangles else body.tracking_lod(triangles)
     parts = Parts(config, tracking_body, source, detector, make_pipeline(tracking_body, detector, config))
@@ -76,7 +83,6 @@ def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score:
             stack.callback(sink.close)
         parts.sinks.extend(recording)
         parts.outputs = [Path(s.path) for s in recording]
-    ground_truth = getattr(source, "ground_truth", None)
     if score and ground_truth is not None:
         parts.score = ScoreSink(ground_truth)
         parts.sinks.append(parts.score)
@@ -143,7 +149,7 @@ def run_summary(parts: Parts, stats: WorkerStats, seconds: float, worker: Worker
               "latency_ms": {k: None if v is None else round(v, 1)
                              for k, v in latency_summary(stats.all_latencies).items()},
               "outputs": {str(p): p.stat().st_size for p in parts.outputs if p.exists()},
-              "opencl_device": worker.opencl_device, "state": worker.state}
+              "opencl_device": worker.opencl_device, "state": worker.state, "sink_errors": list(worker.sink_errors)}
     result.update(score_summary(parts))
     return result
 
@@ -165,6 +171,7 @@ def format_summary(result: dict) -> str:
     lines += format_accuracy(result)
     for path, size in result["outputs"].items():
         lines.append(f"  {path}  {size:,} bytes")
+    lines += [f"  failed (nothing more written to it): {error}" for error in result.get("sink_errors", ())]
     return "\n".join(lines)
 
 

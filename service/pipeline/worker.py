@@ -23,7 +23,8 @@ and the status-only sinks of :mod:`swarmpose.pipeline.status`: health file, log)
 
 Failures never stop the worker where it can go on: a detector exception tracks the frame
 without joints; a tracker exception publishes the frame without bodies and restarts the
-track; a sink that fails is reported and the others go on; a live source that fails is
+track; a sink that fails is reported once and gets no more messages (the others go on; its
+failure is kept in ``sink_errors``); a live source that fails is
 reopened every ``reopen_s`` seconds; a recording that ends or fails ends the run (or starts
 over with ``loop``).
 """
@@ -39,7 +40,7 @@ from dataclasses import dataclass
 
 from swarmpose.pipeline.handover import END, Handover
 from swarmpose.pipeline.status import WorkerStats, status_message
-from swarmpose.pipeline.step import Detection, FramePipeline, skipped_result
+from swarmpose.pipeline.step import Detection, FramePipeline, describe_error, skipped_result
 from swarmpose.publish.sink import Sink
 from swarmpose.sources.base import Frame, FrameSource, SkippedFrame, exc_message
 
@@ -85,6 +86,9 @@ class Worker:
         self.state = "starting"
         self.stats = WorkerStats(keep_all=not drop_stale)
         self.errors: collections.deque[str] = collections.deque(maxlen=MAX_ERRORS)
+        self.sink_errors: list[str] = []
+        """One line per sink that failed on a frame (it got nothing more)."""
+        self._live_sinks = list(self.sinks)
         self._stop = threading.Event()
         self._done = threading.Event()
         self._lock = threading.Lock()
@@ -104,10 +108,14 @@ class Worker:
 
     # ------------------------------------------------------------------ control
     def stop(self) -> None:
-        """Ask every thread to finish (from a signal handler or another thread)."""
-        with self._lock:
-            self._stop.set()
-            self.state = "stopping"
+        """Ask every thread to finish (from a signal handler or another thread).
+
+        Takes no lock of the worker's: a signal handler runs in the main thread, between two
+        of its bytecodes, possibly while that thread holds ``_lock`` (a status being made),
+        and would wait for itself forever. The Event is set before the state is written, and
+        :meth:`_set_state` looks at the Event again after writing, so "stopping" stays."""
+        self._stop.set()
+        self.state = "stopping"
         self._acquired.abort()
         self._detected.abort()
 
@@ -116,6 +124,8 @@ class Worker:
         with self._lock:
             if not self._stop.is_set():
                 self.state = state
+                if self._stop.is_set():  # stop() came in between: its "stopping" wins
+                    self.state = "stopping"
 
     def report(self, message: str) -> None:
         """Keep an error message for the next status (newest last) and log it."""
@@ -150,8 +160,11 @@ class Worker:
                 for sink in self.sinks:
                     try:
                         sink.close()
-                    except Exception as exc:  # report, close the others
-                        self.report(f"closing {type(sink).__name__}: {exc_message(exc)}")
+                    except Exception as exc:  # report (a sink that failed before: once is enough), go on
+                        if sink in self._live_sinks:
+                            self.report(f"closing {type(sink).__name__}: {exc_message(exc)}")
+                        else:
+                            log.debug("closing %s: %s", type(sink).__name__, exc_message(exc))
         return self.stats
 
     def _guard(self, fn: Callable[[], None]) -> None:
@@ -278,11 +291,14 @@ class Worker:
     def _publish(self, got: Received) -> None:
         message = self._result(got).to_message(self.camera, received_ns=got.received_ns)
         frame = got.item if isinstance(got.item, Frame) else None
-        for sink in self.sinks:
+        for sink in list(self._live_sinks):
             try:
                 sink.frame(message, frame)
-            except Exception as exc:  # one failing sink must not stop the others
-                self.report(f"{type(sink).__name__}: {exc_message(exc)}")
+            except Exception as exc:  # one failing sink must not stop the others; it gets no more
+                what = f"{type(sink).__name__}: {describe_error(exc)}"
+                self._live_sinks.remove(sink)
+                self.sink_errors.append(what)
+                self.report(f"{what}; it gets no more messages")
         self.stats.update(latency_ms=message["latency_ms"], published=1, period_published=1)
 
     # ------------------------------------------------------------------ status
@@ -305,7 +321,7 @@ class Worker:
         except Exception as exc:  # e.g. zenoh's state while the session closes: skip this status
             self.report(f"status: {type(exc).__name__}: {exc_message(exc)}")
             return
-        for sink in self.sinks:
+        for sink in list(self._live_sinks):
             try:
                 sink.status(message)
             except Exception as exc:  # keep going; the next status carries the error

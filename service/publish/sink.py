@@ -14,8 +14,9 @@ class Sink(Protocol):
     and the :class:`~swarmpose.sources.base.Frame` it was made from (None for a frame the
     source could not deliver). ``status(message)``: a ``swarmpose.status`` message.
     ``close()``: flush and release; called once, also after errors. A sink raises
-    :class:`~swarmpose.core.errors.OutputError` when it cannot write; the worker reports that on
-    the status and goes on with its other sinks.
+    :class:`~swarmpose.core.errors.OutputError` when it cannot write; the worker reports that
+    once (on the status and the log), hands that sink nothing more (it is still closed) and
+    goes on with its other sinks.
     """
 
     def frame(self, message: dict, frame: Frame | None) -> None: ...

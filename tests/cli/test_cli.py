@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import subprocess
 import sys
@@ -107,6 +108,19 @@ def test_demo_writes_a_sequence_and_tracks_it(tmp_path, capsys):
     assert [m["frame"] for m in messages] == [0, 1, 2]
     for name in ("poses.csv", "poses.bvh", "overlay.mp4"):
         assert (tmp_path / "replay" / name).stat().st_size > 0
+
+
+def test_demo_with_a_replay_file_that_cannot_be_written_exits_1_keeping_the_rest(tmp_path, capsys):
+    replay = tmp_path / "replay"
+    replay.mkdir()
+    (replay / "poses.jsonl").symlink_to("/dev/full")      # every write: no space left on device
+    args = ["demo", "--out", str(tmp_path / "demo"), "--frames", "3", "--particles", "12", "--generations", "8"]
+    assert main(args + ["--quiet"]) == 1
+    captured = capsys.readouterr()
+    assert "the subscriber received 3 frames (exit status 0)" in captured.out
+    assert "failed (nothing more written to it): JsonlSink: cannot write" in captured.out
+    assert captured.err.count("No space left on device") == 1
+    assert [int(r["frame"]) for r in csv.DictReader((replay / "poses.csv").open())] == [0, 1, 2]
 
 
 def test_bench_score_json_has_the_documented_keys(capsys):

@@ -1,5 +1,6 @@
 """`swarmpose track` / `swarmpose eval` end to end on a synthetic sequence, and their bad input:
-a corrupt PNG, a missing frame, a folder without ground truth, a run cut short."""
+a corrupt PNG, a missing frame, a folder without ground truth, a run cut short, a source that
+breaks off."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from swarmpose.messages import validate
 from swarmpose.pipeline.run import run_sequence
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.publish.files import JsonlSink
+from swarmpose.sources.base import FrameSource
 from swarmpose.sources.groundtruth import load_ground_truth
 from swarmpose.sources.registry import open_source
 from swarmpose.tracking.body_tracker import BodyTracker
@@ -117,3 +119,47 @@ def test_lines_written_before_a_failure_are_kept(sequence, tmp_path):
         run_sequence(dying(), pipeline, [JsonlSink(out)], progress=False)
     lines = [validate(json.loads(x)) for x in out.read_text().splitlines()]
     assert [x["frame"] for x in lines] == [0, 1]
+
+
+class VanishingSource(FrameSource):
+    """The real folder source, whose device 'vanishes' after ``keep`` frames."""
+
+    def __init__(self, inner, keep):
+        self.inner, self.keep, self.uri, self.length = inner, keep, inner.uri, inner.length
+        self.ground_truth = inner.ground_truth
+
+    def _frames(self):
+        for i, item in enumerate(self.inner):
+            if i == self.keep:
+                raise SourceError("USB device disconnected")
+            yield item
+
+    def close(self):
+        self.inner.close()
+
+
+@pytest.mark.parametrize("command", ["track", "eval"])
+def test_a_source_that_breaks_off_is_named_and_exits_1_keeping_the_frames(sequence, tmp_path, capsys, monkeypatch,
+                                                                           command):
+    monkeypatch.setattr("swarmpose.pipeline.service.open_source", lambda uri: VanishingSource(open_source(uri), 3))
+    out = tmp_path / "out"
+    assert main([command, str(sequence), "--out", str(out), "--mode", "lift"] + FAST) == 1
+    lines = [json.loads(x) for x in (out / "poses.jsonl").read_text().splitlines()]
+    assert [x["frame"] for x in lines] == [0, 1, 2]
+    err = capsys.readouterr().err
+    assert f"source {sequence} ended with an error: USB device disconnected" in err
+
+
+def test_eval_without_ground_truth_fails_before_tracking(sequence, tmp_path, capsys):
+    bare = tmp_path / "bare"
+    shutil.copytree(sequence, bare)
+    (bare / "groundtruth.jsonl").unlink()
+    detections = tmp_path / "openpose"
+    detections.mkdir()
+    (detections / "v_000000000000_keypoints.json").write_text(json.dumps({"people": []}))
+    out = tmp_path / "out"
+    assert main(["eval", str(bare), "--detector", f"openpose-json:{detections}", "--mode", "lift", "--out", str(out),
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert f"{bare} has no ground truth" in err and "`swarmpose synth`" in err and "`swarmpose track`" in err
+    assert not (out / "poses.jsonl").exists()     # it failed before tracking a frame

@@ -110,3 +110,32 @@ def test_serve_with_a_broken_config_or_no_source_exits_2(tmp_path):
     run = subprocess.run([sys.executable, "-m", "swarmpose", "serve"], capture_output=True, text=True, env=env,
                          timeout=120)
     assert run.returncode == 2 and "no source" in run.stderr and "SWARMPOSE_SOURCE" in run.stderr
+
+
+def test_a_file_merges_the_top_level_and_the_swarmpose_table_with_their_sections(tmp_path):
+    conf = tmp_path / "both.toml"
+    conf.write_text('[tracker]\nparticles = 16\n[zenoh]\nzenoh_mode = "client"\n'
+                    '[swarmpose]\nsource = "folder:/a"\n[swarmpose.tracker]\ngenerations = 8\n'
+                    '[swarmpose.zenoh]\nmulticast = false\n')
+    assert read_toml(conf, ServiceConfig) == {"particles": 16, "zenoh_mode": "client", "source": "folder:/a",
+                                              "generations": 8, "multicast": False}
+    c = load(ServiceConfig, {}, config_file=str(conf), env={})
+    assert (c.tracker.particles, c.tracker.generations, c.zenoh.zenoh_mode) == (16, 8, "client")
+
+
+@pytest.mark.parametrize(("text", "needle"), [
+    ('particles = 8\n[swarmpose]\nparticles = 16\n', r"particles is given twice \('particles' at the top level and "
+                                                     r"'particles' in \[swarmpose\]\)"),
+    ('[tracker]\nparticles = 8\n[swarmpose.tracker]\nparticles = 16\n', r"particles is given twice"),
+    ('joints = "simulated"\n[swarmpose]\ndetector = "simulated"\n', r"detector is given twice \('joints'"),
+    ('[zenoh]\nparticles = 3\n', r"key 'particles' in table \[zenoh\] is not a zenoh setting; it belongs in "
+                                 r"\[tracker\]"),
+    ('[swarmpose.tracker]\nzenoh-mode = "off"\n', r"key 'zenoh-mode' in table \[swarmpose.tracker\] is not a "
+                                                  r"tracker setting; it belongs in \[swarmpose.zenoh\]"),
+    ('[tracker]\nsource = "folder:/a"\n', r"key 'source' in table \[tracker\] .* belongs at the top level"),
+])
+def test_a_setting_given_twice_or_in_a_table_not_its_own_names_the_file_and_key(tmp_path, text, needle):
+    conf = tmp_path / "clash.toml"
+    conf.write_text(text)
+    with pytest.raises(ConfigError, match=r"config file .*clash.toml: " + needle):
+        read_toml(conf, ServiceConfig)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -13,6 +14,7 @@ from pathlib import Path
 
 import av
 import numpy as np
+import pytest
 from conftest import REPO, free_port
 
 from swarmpose.body.skeleton import EVAL_JOINTS
@@ -95,3 +97,47 @@ def test_serve_with_the_example_subscriber_beside_it(wave_sequence, tmp_path):
         serve.terminate()
         assert serve.wait(timeout=30) == 0
     assert "swarmpose serve: folder:" in serve.stderr.read()
+
+
+def test_replay_with_an_output_that_fails_every_frame_reports_it_once_and_exits_1(wave_sequence, tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "poses.jsonl").symlink_to("/dev/full")        # every write: no space left on device
+    assert main(["replay", str(wave_sequence), "--out", str(out), "--mode", "lift", "--no-overlay", "--json",
+                 "--quiet"]) == 1
+    captured = capsys.readouterr()
+    result = json.loads(captured.out)
+    assert len(result["sink_errors"]) == 1 and "No space left on device" in result["sink_errors"][0]
+    assert captured.err.count("No space left on device") == 1 and "it gets no more messages" in captured.err
+    assert [int(r["frame"]) for r in csv.DictReader((out / "poses.csv").open())] == list(range(6))  # the others go on
+    assert len(read_bvh(out / "poses.bvh")) == 6
+
+
+def test_replay_stopped_by_a_signal_exits_130_keeping_what_it_tracked(wave_sequence, tmp_path):
+    out = tmp_path / "out"
+    replay = subprocess.Popen([str(BIN / "swarmpose"), "replay", str(wave_sequence), "--out", str(out), "--mode",
+                               "lift", "--rate", "2", "--no-overlay", "--quiet"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not ((out / "poses.jsonl").exists() and (out / "poses.jsonl").read_text()):
+            assert time.monotonic() < deadline and replay.poll() is None, "replay did not start"
+            time.sleep(0.05)
+        replay.send_signal(signal.SIGINT)
+        assert replay.wait(timeout=30) == 130
+    finally:
+        if replay.poll() is None:
+            replay.kill()
+    assert "interrupted" in replay.stderr.read()
+    frames = [json.loads(x)["frame"] for x in (out / "poses.jsonl").read_text().splitlines()]
+    assert 1 <= len(frames) < 6 and frames == list(range(len(frames)))
+
+
+def test_replay_offers_no_flags_it_would_ignore(wave_sequence, tmp_path, capsys):
+    for flag in (["--loop"], ["--record", str(tmp_path / "r")]):
+        with pytest.raises(SystemExit) as exit_:
+            main(["replay", str(wave_sequence), "--out", str(tmp_path / "o")] + flag)
+        assert exit_.value.code == 2 and f"unrecognized arguments: {flag[0]}" in capsys.readouterr().err
+    help_text = subprocess.run([str(BIN / "swarmpose"), "serve", "--help"], capture_output=True, text=True,
+                               timeout=60).stdout
+    assert "--loop" in help_text and "--record" in help_text        # serve keeps them

@@ -1,4 +1,4 @@
-"""``--joints SPEC`` -> detector: every form, its options, and the errors users see."""
+"""``--detector SPEC`` (older name ``--joints``) -> detector: every form, its options, and the errors users see."""
 
 from __future__ import annotations
 

@@ -5,6 +5,7 @@ both), and on bad input."""
 from __future__ import annotations
 
 import json
+import logging
 import subprocess
 import sys
 from pathlib import Path
@@ -14,8 +15,9 @@ import pytest
 
 import swarmpose
 from swarmpose.cli.main import main
-from swarmpose.core.errors import ConfigError, ShapeError
+from swarmpose.core.errors import ConfigError, ShapeError, SourceError
 from swarmpose.messages import validate
+from swarmpose.sources.base import FrameSource
 from swarmpose.sources.groundtruth import load_ground_truth
 
 REPO = Path(__file__).resolve().parents[2]
@@ -103,3 +105,56 @@ def test_subscribe_has_normal_flags_and_help():
     run = subprocess.run([sys.executable, "-m", "swarmpose", "subscribe", "--count", "1", "--timeout", "0.5",
                           "--no-multicast", "--connect", "tcp/127.0.0.1:1"], capture_output=True, text=True, timeout=60)
     assert run.returncode == 1 and "got 0 of 1 frames" in run.stderr
+
+
+def test_settings_by_name_are_converted_and_checked_as_flags_are(wave_sequence):
+    with pytest.raises(ConfigError, match="argument particles: particles = 'many' is not an integer"):
+        swarmpose.Tracker(particles="many")
+    with pytest.raises(ConfigError, match="particles = 6.5 is not an integer"):
+        swarmpose.Tracker(particles=6.5)
+    with pytest.raises(ConfigError, match="threshold_m must be a finite number; got nan"):
+        swarmpose.Tracker(threshold_m=float("nan"))
+    with pytest.raises(ConfigError, match="pso must be one of"):
+        swarmpose.Tracker(pso=3)
+    with pytest.raises(ConfigError, match="tile sides must be within 8..512 pixels; got 4x4"):
+        swarmpose.Tracker(tile=(4, 4))
+    with pytest.raises(ConfigError, match="tile sides must be within 8..512 pixels; got 1024x64"):
+        swarmpose.TrackerConfig(tile=(1024, 64))
+    with pytest.raises(ConfigError, match="tile must be WxH pixels"):
+        swarmpose.TrackerConfig(tile=(64.5, 64))
+    source = swarmpose.open_source(f"folder:{wave_sequence}")
+    with swarmpose.Tracker(source=source, particles="32", tile="32x48", smoothing="0.5") as tracker:
+        assert (tracker.config.particles, tracker.config.tile, tracker.config.smoothing) == (32, (32, 48), 0.5)
+    source.close()
+
+
+def test_the_simulated_detector_without_a_source_says_what_to_pass():
+    with pytest.raises(ConfigError, match=r"simulated detector .*swarmpose synth.* source=.*detector='onnx:movenet"):
+        swarmpose.Tracker()
+
+
+class CountingSource(FrameSource):
+    """The real folder source, counting the items read from it; its device 'vanishes' after ``keep``."""
+
+    def __init__(self, inner, keep=None):
+        self.inner, self.keep, self.uri, self.length, self.reads = inner, keep, inner.uri, inner.length, 0
+        self.ground_truth = inner.ground_truth
+
+    def _frames(self):
+        for i, item in enumerate(self.inner):
+            if i == self.keep:
+                raise SourceError("USB device disconnected")
+            self.reads += 1
+            yield item
+
+
+def test_track_reads_no_frame_past_frames_and_warns_when_the_source_breaks(wave_sequence, caplog):
+    source = CountingSource(swarmpose.open_source(f"folder:{wave_sequence}"))
+    assert [r.index for r in swarmpose.track(source, frames=2, mode="lift")] == [0, 1]
+    assert source.reads == 2
+    dying = CountingSource(swarmpose.open_source(f"folder:{wave_sequence}"), keep=3)
+    with caplog.at_level(logging.WARNING, logger="swarmpose"):
+        assert [r.index for r in swarmpose.track(dying, mode="lift")] == [0, 1, 2]
+    assert dying.status == "error: USB device disconnected"
+    assert any(f"source folder:{wave_sequence} ended with an error: USB device disconnected" in r.getMessage()
+               for r in caplog.records)

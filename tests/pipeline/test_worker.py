@@ -8,8 +8,10 @@ camera, detector or frame would.
 from __future__ import annotations
 
 import json
+import signal
 import threading
 import time
+from contextlib import ExitStack
 from dataclasses import replace
 
 import numpy as np
@@ -18,6 +20,7 @@ import pytest
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.cli.main import main
+from swarmpose.cli.serve import stop_on_signals
 from swarmpose.core.errors import DetectorError, OutputError, SourceError
 from swarmpose.detect.registry import make_detector
 from swarmpose.messages import validate
@@ -219,15 +222,24 @@ def test_a_live_source_that_dies_is_reopened(wave_sequence, body):
 
 
 class BrokenSink(Collect):
+    def __init__(self):
+        super().__init__()
+        self.calls = 0
+
     def frame(self, message, frame):
+        self.calls += 1
         raise OutputError("disk full writing /data/poses.csv")
 
 
-def test_a_failing_sink_is_reported_and_the_others_go_on(wave_sequence, body):
-    good = Collect()
-    make_worker(wave_sequence, body, [BrokenSink(), good]).run()
+def test_a_failing_sink_is_reported_once_dropped_and_the_others_go_on(wave_sequence, body):
+    good, broken = Collect(), BrokenSink()
+    worker = make_worker(wave_sequence, body, [broken, good])
+    worker.run()
     assert len(good.frames) == 6
-    assert any("disk full" in e for e in good.statuses[-1]["errors"])
+    assert broken.calls == 1 and broken.statuses == [] and broken.closed == 1   # dropped, still closed
+    assert worker.sink_errors == ["BrokenSink: disk full writing /data/poses.csv"]
+    assert sum("disk full" in e for e in good.statuses[-1]["errors"]) == 1
+    assert good.statuses[-1]["state"] == "source-ended"
 
 
 def test_stop_ends_a_running_worker_promptly(wave_sequence, body):
@@ -238,6 +250,26 @@ def test_stop_ends_a_running_worker_promptly(wave_sequence, body):
     worker.run()
     assert time.monotonic() - t0 < 20
     assert sink.statuses[-1]["state"] == "stopping" and sink.closed == 1
+
+
+def test_a_signal_while_the_main_thread_holds_the_lock_stops_at_once(wave_sequence, body):
+    """The CLI's SIGTERM handler runs in the main thread, maybe while it holds the worker's lock."""
+    worker = make_worker(wave_sequence, body, [Collect()])
+    safety = threading.Timer(5.0, worker._lock.release)   # would unblock a deadlocked stop()
+    with ExitStack() as stack:
+        stop_on_signals(worker, stack)
+        worker._lock.acquire()
+        safety.start()
+        t0 = time.monotonic()
+        signal.raise_signal(signal.SIGTERM)
+        waited = time.monotonic() - t0
+        safety.cancel()
+        if worker._lock.locked():
+            worker._lock.release()
+    worker.source.close()
+    assert waited < 1.0 and worker.state == "stopping"
+    worker._set_state("running")
+    assert worker.state == "stopping"        # a stop is final
 
 
 # ---------------------------------------------------------------------------------------------- health
