@@ -1,13 +1,17 @@
-"""``swarmpose bench score`` and ``swarmpose bench detect``: the benchmarks BENCHMARKS.md records."""
+"""``swarmpose bench score|detect|accuracy``: the benchmarks BENCHMARKS.md records."""
 
 from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
+from swarmpose.bench.accuracy import run_matrix
+from swarmpose.bench.accuracy_report import format_summary, format_table, plot_heatmap
 from swarmpose.bench.detect import bench_detectors, format_detect_bench
+from swarmpose.bench.matrix import DETECTORS, MODES, SUBSETS
 from swarmpose.bench.score import bench_score, format_bench
-from swarmpose.cli.common import DEFAULTS, add_body_options, positive_int
+from swarmpose.cli.common import DEFAULTS, add_body_options, positive_int, quiet
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import parse_size
 
@@ -34,6 +38,34 @@ def cmd_bench_detect(args: argparse.Namespace) -> int:
     return 0
 
 
+def _names(allowed: tuple[str, ...]):
+    """An argparse type: comma-separated names out of ``allowed``."""
+    def parse(text: str) -> tuple[str, ...]:
+        names = tuple(n.strip() for n in text.split(",") if n.strip())
+        bad = [n for n in names if n not in allowed]
+        if bad or not names:
+            raise argparse.ArgumentTypeError(f"{text!r}: choose from {', '.join(allowed)} (comma-separated)")
+        return names
+    return parse
+
+
+def cmd_bench_accuracy(args: argparse.Namespace) -> int:
+    """The tracker over the benchmark matrix: per cell and mode Δ, A(100), lost frames, facing."""
+    tracker = {"particles": args.particles, "generations": args.generations}
+    records = run_matrix(Path(args.out), subset=args.subset, detectors=args.detectors, modes=args.modes,
+                         frames=args.frames, tracker=tracker, assets=args.assets, progress=not quiet(args))
+    out = Path(args.out)
+    table = "\n\n".join([format_summary(records), format_table(records)]) + "\n"
+    (out / "table.md").write_text(table)
+    (out / "records.json").write_text(json.dumps(records, indent=1))
+    plot_heatmap(records, out / "heatmap.png")
+    if args.json:
+        print(json.dumps({"out": str(out), "records": records}))
+    else:
+        print(table + f"\nrecords, table.md and heatmap.png in {out}")
+    return 0
+
+
 def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     """Register ``bench score`` and ``bench detect``."""
     bench = sub.add_parser("bench", help="benchmarks").add_subparsers(dest="bench", required=True, metavar="BENCH")
@@ -57,3 +89,19 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
                    help="shared assets folder (default: $SWARMPOSE_ASSETS or ../shared/assets)")
     p.add_argument("--json", action="store_true", help="one JSON object")
     p.set_defaults(func=cmd_bench_detect)
+    p = bench.add_parser("accuracy", parents=[common], formatter_class=DEFAULTS,
+                         help="the tracker over views x motions x shapes x detectors (resumable)")
+    p.add_argument("--out", required=True, help="folder of the sequences, the per-cell results, table and heat map; "
+                                                "run again to resume")
+    p.add_argument("--subset", choices=SUBSETS, default="full",
+                   help="full: 15 sequences x 3 detectors; regression: walk from the side and behind, MoveNet")
+    p.add_argument("--detectors", type=_names(tuple(DETECTORS)), default=None,
+                   help=f"comma-separated subset of {', '.join(DETECTORS)} (default: the subset's)")
+    p.add_argument("--modes", type=_names(MODES), default=MODES, help="comma-separated tracker modes")
+    p.add_argument("--frames", type=positive_int, default=40, help="frames per sequence")
+    p.add_argument("--particles", type=positive_int, default=64, help="PSO particles")
+    p.add_argument("--generations", type=positive_int, default=64, help="PSO generations")
+    p.add_argument("--assets", default=None,
+                   help="shared assets folder (default: $SWARMPOSE_ASSETS or ../shared/assets)")
+    p.add_argument("--json", action="store_true", help="one JSON object with every record")
+    p.set_defaults(func=cmd_bench_accuracy)

@@ -14,8 +14,8 @@ LOG_INTERVAL_S = 10.0
 """Seconds between progress lines when standard error is not a terminal."""
 
 
-def progress_bar(label: str, total: int | None, enabled: bool = True) -> tqdm:
-    """A bar of ``total`` items (None: unknown) labelled ``label``; call ``update(n)`` and ``close()``."""
+def progress_bar(label: str, total: int | None, enabled: bool = True, unit: str = "frame") -> tqdm:
+    """A bar of ``total`` items (None: unknown) of ``unit`` labelled ``label``; call ``update(n)`` and ``close()``."""
     tty = bool(getattr(sys.stderr, "isatty", lambda: False)())
-    return tqdm(total=total or None, desc=label, unit="frame", disable=not enabled, file=sys.stderr,
+    return tqdm(total=total or None, desc=label, unit=unit, disable=not enabled, file=sys.stderr,
                 mininterval=0.1 if tty else LOG_INTERVAL_S, dynamic_ncols=tty, leave=True)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.core.errors import check_shape
 
 THRESHOLDS_MM: tuple[int, ...] = tuple(range(20, 201, 20))
@@ -83,3 +84,26 @@ def plot_accuracy(curves: dict[str, dict[int, float]], path, title: str = "") ->
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def torso_facing(joints: np.ndarray) -> np.ndarray:
+    """(F, 3) unit forward direction of the torso of joints (F, J, 3) in ``EVAL_JOINTS`` order:
+    the body's left axis (right to left shoulder plus right to left hip) crossed with its up
+    axis (mid-hip to mid-shoulder), as :func:`swarmpose.tracking.init_pose.torso_pose` defines
+    the body frame. NaN rows where a torso joint is missing."""
+    j = {name: np.asarray(joints, float)[:, k] for k, name in enumerate(EVAL_JOINTS)}
+    left = (j["left_shoulder"] - j["right_shoulder"]) + (j["left_hip"] - j["right_hip"])
+    up = (j["left_shoulder"] + j["right_shoulder"] - j["left_hip"] - j["right_hip"]) / 2.0
+    forward = np.cross(left, up)
+    norm = np.linalg.norm(forward, axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(norm > 1e-9, forward / norm, np.nan)
+
+
+def facing_errors_deg(estimates: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """(F,) angle in degrees between the estimated and true torso facing (see
+    :func:`torso_facing`) of joints (F, J, 3) m; NaN where either is unknown. A mirrored
+    (front-for-back) fit is near 180°."""
+    a, b = torso_facing(estimates), torso_facing(truth)
+    cos = np.clip(np.sum(a * b, axis=1), -1.0, 1.0)
+    return np.degrees(np.arccos(cos))

@@ -6,11 +6,13 @@ Per frame (:meth:`BodyTracker.step`):
 1. The detection's joints (score >= ``min_score``) are lifted to J^e on the depth.
 2. **Start**. With a previous solution (state *tracking*), particles start around it in a
    region that contains J^e (:mod:`swarmpose.tracking.search`); the last 5 solutions and
-   the J^e torso pose are injected as particles. Without one (the first frame, or after the
-   track was lost: state *init*), the torso pose of J^e
-   (:func:`swarmpose.tracking.init_pose.torso_pose`) with the body's rest angles starts a
-   joints-only PSO over wide angle ranges (twice the generations), whose result is the
-   centre of the normal search. No manual initialisation.
+   the J^e torso pose are injected as particles; every ``recheck`` frames the start's
+   facings, refitted from the detection, compete as particles too. Without one (the first frame, or
+   after the track was lost: state *init*), the torso pose of J^e
+   (:func:`swarmpose.tracking.init_pose.torso_pose`) with the body's rest angles, turned
+   to each of four facings (side and back views make its facing unreliable), starts one
+   PSO over wide angle ranges each; the best fit by the objective is the centre of the
+   normal search, the others join it as particles. No manual initialisation.
 3. **Search**. PSO (canonical or perturbed) of ``E = w_D·E_D + w_J·E_J``.
 4. **Verdict** (:mod:`swarmpose.tracking.verdict`): lost or not, and per-joint confidence.
    Frames with no usable joints and no previous solution, or with neither joints nor
@@ -38,7 +40,7 @@ from swarmpose.gpu.tile import box_around
 from swarmpose.sources.base import Frame
 from swarmpose.tracking import search, verdict
 from swarmpose.tracking.config import TrackerConfig
-from swarmpose.tracking.init_pose import torso_pose
+from swarmpose.tracking.init_pose import FACINGS_DEG, torso_pose, turned
 from swarmpose.tracking.lift import lift_eval_joints
 from swarmpose.tracking.objective import JointTargets, Objective
 from swarmpose.tracking.pso import minimise
@@ -46,6 +48,9 @@ from swarmpose.tracking.result import BodyResult, lost_body
 
 HISTORY = 5
 """Previous solutions injected as particles."""
+
+HYBRID_RATIO = 3.0
+"""w_D / w_J of the hybrid mode: the start weighs the joints at least this much in depth mode."""
 
 
 class BodyTracker:
@@ -122,16 +127,17 @@ class BodyTracker:
         pso = self.config.pso_config
         timings: dict[str, float] = {}
         if state == "init":
-            centre = self._initialise(centre, targets, rng, timings)
-            seeds = [centre]
+            seeds = self._initialise(centre, targets, depth, rng, timings)
+            centre = seeds[0]
             start = search.spread(centre, pso.particles, rng, np.full(3, 0.04), 0.1, 0.15)
         else:
             centre = self.previous
+            recheck = self._recheck(frame.index, lifted, targets, depth, rng, timings)
             torso = torso_pose(self.body, lifted, centre[7:])
             offset = np.abs(torso[:3] - centre[:3]) if torso is not None else np.zeros(3)
             radius = search.angle_radius(self.body, self.intrinsics, centre, targets)
             start = search.spread(centre, pso.particles, rng, 0.04 + offset, 0.15, radius)
-            seeds = [centre] + self.history[-HISTORY:][::-1] + ([torso] if torso is not None else [])
+            seeds = [centre] + self.history[-HISTORY:][::-1] + ([torso] if torso is not None else []) + recheck
         for i, s in enumerate(seeds[:pso.particles]):
             start[i] = s
 
@@ -172,21 +178,48 @@ class BodyTracker:
         self.reset()
         return lost_body(reason, self.body_id, {"total": 1000 * (time.perf_counter() - t0)})
 
-    def _initialise(self, centre: np.ndarray, targets: JointTargets, rng: np.random.Generator,
-                    timings: dict[str, float]) -> np.ndarray:
-        """Joints-only PSO over wide angle ranges from the J^e torso pose; returns the centre for the frame."""
+    def _initialise(self, centre: np.ndarray, targets: JointTargets, depth: np.ndarray, rng: np.random.Generator,
+                    timings: dict[str, float], generations: int | None = None) -> list[np.ndarray]:
+        """Start poses for a frame without a track, best first.
+
+        A side or back view makes the facing of the lifted torso unreliable (the far shoulder
+        and hip lift onto the near side), so the start tries the J^e torso pose turned to each
+        of :data:`FACINGS_DEG`: from each, a PSO over wide angle ranges of the objective (with
+        the joint term on also in depth mode) fits the limbs, and the fits are ranked by that
+        objective, so depth and the face's keypoints decide between a facing and its mirror.
+        """
         if targets.count == 0:
-            return centre
+            return [centre]
         t = time.perf_counter()
-        joints_only = Objective(self.body, self.intrinsics, self.objective.scorer,
-                                replace(self.weights, depth=0.0, joints=1.0))
-        joints_only.targets = targets
-        pso = replace(self.config.pso_config, generations=2 * self.config.generations, variant="perturbed")
-        start = search.spread(centre, pso.particles, rng, np.full(3, 0.08), 0.3, 1.0)
-        start[0] = centre
-        result = minimise(joints_only, start, self.lo, self.hi, rng, pso, search.renormalise, search.perturb)
-        timings["init"] = 1000 * (time.perf_counter() - t)
-        return result.best
+        weights = replace(self.weights, joints=max(self.weights.joints, self.weights.depth / HYBRID_RATIO))
+        start_objective = Objective(self.body, self.intrinsics, self.objective.scorer, weights)
+        start_objective.set_frame(depth, self._box(centre, targets), targets, centre)
+        # joints only (no depth) converges slower from a wrong facing: twice the generations
+        budget = (generations or self.config.generations) * (1 if self.weights.depth > 0 else 2)
+        pso = replace(self.config.pso_config, variant="perturbed", generations=budget)
+        fits = []
+        for degrees in FACINGS_DEG:
+            facing = turned(self.body, centre, degrees)
+            start = search.spread(facing, pso.particles, rng, np.full(3, 0.08), 0.3, 1.0)
+            start[0] = facing
+            fits.append(minimise(start_objective, start, self.lo, self.hi, rng, pso, search.renormalise,
+                                 search.perturb).best)
+        energy = start_objective(np.stack(fits))
+        timings["init" if generations is None else "recheck"] = 1000 * (time.perf_counter() - t)
+        return [fits[k] for k in np.argsort(energy)]
+
+    def _recheck(self, index: int, lifted: dict[str, np.ndarray], targets: JointTargets, depth: np.ndarray,
+                 rng: np.random.Generator, timings: dict[str, float]) -> list[np.ndarray]:
+        """Every ``config.recheck`` frames, the start's facings refitted from the detection on a
+        quarter of the budget: they join the swarm as particles, so a track locked in a wrong
+        facing or limb configuration is replaced as soon as they explain the frame better."""
+        every = self.config.recheck
+        if not every or index % every or targets.count == 0:
+            return []
+        centre = torso_pose(self.body, lifted, self.body.rest_angles)
+        if centre is None:
+            return []
+        return self._initialise(centre, targets, depth, rng, timings, max(self.config.generations // 4, 1))[:2]
 
     def _smooth(self, best: np.ndarray) -> np.ndarray:
         a = self.config.smoothing

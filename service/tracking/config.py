@@ -28,6 +28,10 @@ class TrackerConfig:
     tile: tuple[int, int] = setting((64, 64), "depth tile WxH pixels over the person's box", kind="size")
     triangles: int = setting(1500, "tracking level of detail of the body mesh, triangles", minimum=100)
     seed: int = setting(0, "PSO seed (a run repeats exactly with the same seed)", minimum=0)
+    recheck: int = setting(10, "every this many frames, refit the start's facings from the detection and let them "
+                               "compete with the track (0 = off)", minimum=0)
+    label_swaps: bool = setting(True, "a detected left/right pair may match the model's pair crossed, at a cost "
+                                      "(detectors swap sides on people seen from behind)")
     smoothing: float = setting(0.0, "blend each pose with the previous one, 0..1 (0 = off, as in evaluation)",
                                minimum=0.0, maximum=0.99)
     device: str = setting("", "OpenCL device: cpu, gpu, PLATFORM:DEVICE or part of its name (empty: a GPU, "
@@ -54,4 +58,5 @@ class TrackerConfig:
         w_d, w_j = MODE_WEIGHTS.get(self.mode, (0.0, 1.0))
         return ObjectiveWeights(depth=w_d if self.depth_weight is None else self.depth_weight,
                                 joints=w_j if self.joints_weight is None else self.joints_weight,
-                                alpha=self.alpha, threshold_m=self.threshold_m, min_score=self.min_score)
+                                alpha=self.alpha, threshold_m=self.threshold_m, min_score=self.min_score,
+                                label_swaps=self.label_swaps)

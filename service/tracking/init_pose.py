@@ -10,8 +10,9 @@ mid-hip (at its rest angles) on the lifted mid-hip. The joint angles are the cal
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
-from swarmpose.body.kinematics import matrix_to_quaternion
+from swarmpose.body.kinematics import matrix_to_quaternion, quaternion_to_matrix
 from swarmpose.body.skinned import SkinnedBody
 
 TORSO = ("left_hip", "right_hip", "left_shoulder", "right_shoulder")
@@ -53,4 +54,24 @@ def torso_pose(body: SkinnedBody, lifted: dict[str, np.ndarray], angles: np.ndar
     # The rest angles move the hips a little relative to the root; correct with one FK pass.
     posed_mid = body.posed_points(h[None], ("left_hip", "right_hip"))[0].mean(axis=0)
     h[:3] += hip - posed_mid
+    return h
+
+
+FACINGS_DEG: tuple[float, ...] = (0.0, 180.0, 90.0, -90.0)
+"""Turns about the body's up axis the start tries (the J^e torso facing, its back, its sides)."""
+
+
+def turned(body: SkinnedBody, pose: np.ndarray, degrees: float) -> np.ndarray:
+    """A copy of ``pose`` (36,) turned by ``degrees`` about the body's own up axis through its
+    mid-hip: the same angles and mid-hip position, facing elsewhere."""
+    h = np.array(pose, dtype=float)
+    if degrees % 360.0 == 0.0:
+        return h
+    rotation = quaternion_to_matrix(h[3:7])
+    up = rotation[:, 1]
+    turn = Rotation.from_rotvec(np.radians(degrees) * up / np.linalg.norm(up)).as_matrix()
+    mid_before = body.posed_points(h[None], ("left_hip", "right_hip"))[0].mean(axis=0)
+    q = matrix_to_quaternion(turn @ rotation)
+    h[3:7] = q * np.sign(q @ h[3:7] + 1e-12)
+    h[:3] += mid_before - body.posed_points(h[None], ("left_hip", "right_hip"))[0].mean(axis=0)
     return h

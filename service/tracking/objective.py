@@ -14,6 +14,11 @@ sweep in BENCHMARKS.md):
   J^e, with w = 0.2 for hips, 1.8 for wrists and ankles, 1 otherwise; joints missing from
   the detection, below ``min_score`` or without depth drop out of their term.
 * ``E_J = α·E_J2D + (1 − α)·E_J3D``, α = 0.97.
+* Left/right label swaps of the detector (common on people seen from behind or the side):
+  with ``label_swaps``, each detected left/right pair (shoulders, elbows, ..., ears) is
+  matched to the model's pair in the better of the two assignments, the crossed one at a
+  cost of :data:`SWAP_COST` of the person's size (px) per joint, so the labels are trusted
+  unless the crossed fit is clearly better; the 3D term uses the same assignment.
 """
 
 from __future__ import annotations
@@ -30,16 +35,21 @@ from swarmpose.core.errors import ConfigError
 from swarmpose.detect.joints import Joints2D
 from swarmpose.tracking.lift import lift_detection
 
+SWAP_COST = 0.05
+"""Cost of matching a detected left/right pair crossed, per joint, as a share of the person's size."""
+
 
 @dataclass(frozen=True)
 class ObjectiveWeights:
-    """w_D, w_J, α, the clamp T (m) and the lowest detection score a joint needs."""
+    """w_D, w_J, α, the clamp T (m), the lowest detection score a joint needs and whether
+    detected left/right pairs may match the model crossed."""
 
     depth: float = 3.0
     joints: float = 1.0
     alpha: float = 0.97
     threshold_m: float = 0.30
     min_score: float = 0.3
+    label_swaps: bool = True
 
     def __post_init__(self) -> None:
         for name in ("depth", "joints", "threshold_m"):
@@ -76,6 +86,14 @@ class JointTargets:
         """The person's size in pixels: the diagonal of the detected joints' box (0 with fewer than two)."""
         return float(np.linalg.norm(np.ptp(self.xy, axis=0))) if self.count > 1 else 0.0
 
+    @property
+    def pairs(self) -> np.ndarray:
+        """(m, 2) indices of the targets that form a left/right pair (left first)."""
+        index = {n: i for i, n in enumerate(self.names)}
+        found = [(i, index["right_" + n[5:]]) for n, i in index.items()
+                 if n.startswith("left_") and "right_" + n[5:] in index]
+        return np.array(found, dtype=np.int64).reshape(-1, 2)
+
     @classmethod
     def empty(cls) -> JointTargets:
         return cls((), np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros((0, 3)), np.zeros(0))
@@ -97,13 +115,21 @@ class JointTargets:
                    np.array([joint_weight(n) for n in names], float))
 
 
-def weighted_joint_distance(model: np.ndarray, target: np.ndarray, weight: np.ndarray) -> np.ndarray:
+def weighted_joint_distance(model: np.ndarray, target: np.ndarray, weight: np.ndarray,
+                            order: np.ndarray | None = None, swap_cost: float = 0.0) -> np.ndarray:
     """(P,) weighted mean distance between model points (P, n, k) and targets (n, k); rows of
-    ``target`` with NaN drop out. 0 when no target is usable."""
+    ``target`` with NaN drop out. 0 when no target is usable. order: (P, n) which model point
+    each target is matched with (None: the same index); a target matched with another index
+    than its own adds ``swap_cost`` to its distance."""
     ok = np.all(np.isfinite(target), axis=1)
     if not np.any(ok):
         return np.zeros(len(model))
-    d = np.linalg.norm(model[:, ok] - target[ok], axis=2)
+    if order is None:
+        d = np.linalg.norm(model[:, ok] - target[ok], axis=2)
+    else:
+        matched = np.take_along_axis(model, order[..., None], axis=1)
+        d = np.linalg.norm(matched[:, ok] - target[ok], axis=2)
+        d += swap_cost * (order[:, ok] != np.flatnonzero(ok))
     w = weight[ok]
     return d @ w / w.sum()
 
@@ -146,6 +172,29 @@ class Objective:
         idx = self.targets.point_index
         return transform_points(self.body.point_bones[idx], self.body.point_rest[idx], transforms)
 
+    @property
+    def _swap_px(self) -> float:
+        return SWAP_COST * max(self.targets.extent_px, 1.0)
+
+    def _assignment(self, projected: np.ndarray) -> np.ndarray | None:
+        """(P, n) model point index per target: each detected left/right pair matched straight or
+        crossed, whichever fits the projected model points (P, n, 2) better (crossed: at a cost);
+        None when no pair is detected or swaps are off."""
+        pairs = self.targets.pairs
+        if not self.weights.label_swaps or len(pairs) == 0:
+            return None
+        left, right = pairs[:, 0], pairs[:, 1]
+        xy = self.targets.xy
+        straight = (np.linalg.norm(projected[:, left] - xy[left], axis=2)
+                    + np.linalg.norm(projected[:, right] - xy[right], axis=2))
+        crossed = (np.linalg.norm(projected[:, right] - xy[left], axis=2)
+                   + np.linalg.norm(projected[:, left] - xy[right], axis=2) + 2 * self._swap_px)
+        order = np.repeat(np.arange(self.targets.count)[None], len(projected), axis=0)
+        swap = crossed < straight
+        order[:, left] = np.where(swap, right, left)
+        order[:, right] = np.where(swap, left, right)
+        return order
+
     def __call__(self, h: np.ndarray) -> np.ndarray:
         h = np.asarray(h, dtype=np.float64)
         transforms = skinning_transforms(self.body.rig, h)
@@ -160,8 +209,10 @@ class Objective:
             z = np.maximum(pts[..., 2:3], 1e-3)  # a point behind the camera must not flip sides
             f = np.array([self.intrinsics.fx, self.intrinsics.fy])
             c = np.array([self.intrinsics.cx, self.intrinsics.cy])
-            e_2d = weighted_joint_distance(pts[..., :2] / z * f + c, self.targets.xy, self.targets.weight)
-            e_3d = 1000.0 * weighted_joint_distance(pts, self.targets.xyz, self.targets.weight)
+            projected = pts[..., :2] / z * f + c
+            order = self._assignment(projected)
+            e_2d = weighted_joint_distance(projected, self.targets.xy, self.targets.weight, order, self._swap_px)
+            e_3d = 1000.0 * weighted_joint_distance(pts, self.targets.xyz, self.targets.weight, order)
         e_j = w.alpha * e_2d + (1.0 - w.alpha) * e_3d
         total = w.depth * e_d + w.joints * e_j
         self.last_parts = {"E": total, "E_D": e_d, "E_J": e_j, "E_J2D": e_2d, "E_J3D": e_3d}

@@ -14,10 +14,11 @@ from swarmpose.detect.joints import Joints2D
 from swarmpose.gpu.reference import raycast_tiles, reference_score
 from swarmpose.gpu.scorer import ParticleScorer
 from swarmpose.gpu.tile import box_around
+from swarmpose.sim.evaluate import facing_errors_deg
 from swarmpose.sim.render import Renderer, Room
-from swarmpose.tracking.init_pose import torso_pose
+from swarmpose.tracking.init_pose import torso_pose, turned
 from swarmpose.tracking.lift import JOINT_RADIUS, lift_keypoints
-from swarmpose.tracking.objective import JointTargets, Objective, ObjectiveWeights
+from swarmpose.tracking.objective import SWAP_COST, JointTargets, Objective, ObjectiveWeights
 
 INTR = Intrinsics.kinect_v1()
 FACING = (0.0, 1.0, 0.0, 0.0)
@@ -126,3 +127,41 @@ def test_bad_weights():
         ObjectiveWeights(alpha=1.5)
     with pytest.raises(ConfigError):
         ObjectiveWeights(depth=float("nan"))
+
+
+def swapped_labels(det: Joints2D, names: tuple[str, ...]) -> Joints2D:
+    """``det`` with the left and right keypoints of each of ``names`` exchanged."""
+    keypoints = det.keypoints.copy()
+    for name in names:
+        left, right = COCO17.keypoints.index(f"left_{name}"), COCO17.keypoints.index(f"right_{name}")
+        keypoints[[left, right]] = keypoints[[right, left]]
+    return Joints2D(COCO17, keypoints, 0, 0)
+
+
+def test_a_swapped_pair_costs_the_swap_and_no_more(body, scene):
+    h, depth = scene
+    det = swapped_labels(detection_of(body, h), ("wrist",))
+    for swaps in (True, False):
+        objective = Objective(body, INTR, ParticleScorer(body, INTR, (32, 32)),
+                              ObjectiveWeights(depth=0.0, joints=1.0, alpha=1.0, label_swaps=swaps))
+        targets = JointTargets.from_detection(det, depth, INTR, body)
+        objective.set_frame(depth, (100, 50, 400, 400), targets, h)
+        objective(h[None])
+        model = INTR.project(body.posed_points(h[None], targets.names)[0])
+        gap = np.linalg.norm(model[targets.names.index("left_wrist")] - model[targets.names.index("right_wrist")])
+        wrists = 2 * targets.weight[targets.names.index("left_wrist")] / targets.weight.sum()
+        expected = wrists * (SWAP_COST * targets.extent_px if swaps else gap)
+        assert objective.last_parts["E_J2D"][0] == pytest.approx(expected, rel=1e-9)
+    assert gap > 100, "the wrists of a T-pose are far apart: the swap is worth its cost"
+
+
+def test_turning_keeps_the_mid_hip_and_turns_the_facing(body):
+    h = body.rest_pose((0.2, -0.1, 2.5), FACING)
+    hips = ("left_hip", "right_hip")
+    for degrees in (90.0, 180.0, -90.0):
+        t = turned(body, h, degrees)
+        assert np.allclose(body.posed_points(t[None], hips)[0].mean(0), body.posed_points(h[None], hips)[0].mean(0))
+        got = facing_errors_deg(body.posed_points(t[None], EVAL_JOINTS), body.posed_points(h[None], EVAL_JOINTS))
+        assert got[0] == pytest.approx(abs(degrees), abs=2.0)  # the torso leans a little off the turning axis
+    assert np.allclose(turned(body, turned(body, h, 90.0), -90.0), h)
+    assert np.array_equal(turned(body, h, 0.0), h)

@@ -86,7 +86,7 @@ def test_modes(body, sequence):
     assert np.nanmedian(err) < 80 and np.isfinite(err).mean() > 0.8
     assert all(r.pose is None for r in lift)
     joints = track(body, sequence, mode="joints")
-    assert np.mean(errors_mm(joints, sequence)) < 90
+    assert np.mean(errors_mm(joints, sequence)) < 90, np.mean(errors_mm(joints, sequence))
     assert all(r.objective["E_D"] == 0 for r in joints)
     depth = track(body, sequence, mode="depth")
     assert all(r.objective["E_J"] == 0 for r in depth[1:])

@@ -1,0 +1,165 @@
+"""``swarmpose bench accuracy``: the tracker over the benchmark matrix (see :mod:`.matrix`).
+
+For every cell of the matrix and every mode: synthesise the cell's sequence once (MakeHuman
+subject, CMU/other mocap clip, camera yaw/height/distance) into ``OUT/sequences/``, track it
+with the subject's own shape, and score it against the ground truth:
+
+* ``mpjpe_mm`` Δ and ``A100`` (share of joints within 100 mm, misses included),
+* ``lost`` frames (no body, or the body's state *lost*),
+* ``facing_deg`` the mean torso-facing error and ``facing_ok`` the share of frames within 30°
+  (a front-for-back fit is near 180°),
+* ``detector_px`` the detector's median 2D error on the limbs' joints against the true
+  projections, and ``swapped`` the share of frames where its left/right torso labels fit the
+  truth better swapped,
+* ``fps`` of detection + tracking.
+
+Each (cell, mode) is one JSON file in ``OUT/results/``, written when it is done: an
+interrupted run resumes where it stopped. :func:`run_matrix` returns every record.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from contextlib import ExitStack
+from dataclasses import asdict
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from swarmpose.bench.detect import find_assets
+from swarmpose.bench.matrix import DETECTORS, MODES, MOTIONS, Cell, Sequence, cells
+from swarmpose.body.loader import load_body
+from swarmpose.body.skeleton import EVAL_JOINTS
+from swarmpose.core.errors import ConfigError
+from swarmpose.core.progress import progress_bar
+from swarmpose.motion.library import load_motion_spec
+from swarmpose.pipeline.config import ServiceConfig
+from swarmpose.pipeline.run import RunSummary, results
+from swarmpose.pipeline.service import open_parts
+from swarmpose.sim.evaluate import facing_errors_deg, joint_errors, summarise
+from swarmpose.sim.synth import SynthConfig, synthesize
+from swarmpose.tracking.config import TrackerConfig
+
+log = logging.getLogger(__name__)
+
+FACING_OK_DEG = 30.0
+LIMB_JOINTS = tuple(j for j in EVAL_JOINTS if j not in ("head", "neck"))
+PAIRS = (("left_shoulder", "right_shoulder"), ("left_hip", "right_hip"))
+
+
+@lru_cache(maxsize=4)
+def subject(assets: str, shape: str):
+    """The MakeHuman subject of a shape preset (cached: loading takes seconds)."""
+    return load_body(f"makehuman:{assets}/bodies/makehuman", shape)
+
+
+def make_sequence(seq: Sequence, folder: Path, frames: int, assets: Path) -> Path:
+    """``folder`` holding ``frames`` frames of ``seq`` (rendered unless already there, complete)."""
+    gt = folder / "groundtruth.jsonl"
+    if gt.exists() and sum(1 for _ in gt.open()) >= frames:
+        return folder
+    body = subject(str(assets), seq.shape)
+    motion = load_motion_spec(str(assets / MOTIONS[seq.motion]), body, frames, 30.0)
+    config = SynthConfig(frames=frames, camera_yaw_deg=float(seq.yaw_deg), camera_height=seq.camera_height,
+                         camera_distance=seq.camera_distance)
+    tmp = folder.with_name(folder.name + ".partial")
+    synthesize(body, motion, tmp, config, description={"benchmark": asdict(seq)}, progress=False)
+    tmp.rename(folder)
+    return folder
+
+
+def detector_errors(detections: list, truth2d: np.ndarray) -> tuple[float | None, float | None]:
+    """(median 2D error px over the limb joints, share of frames with left/right torso labels
+    swapped) of ``detections`` (one Joints2D or None per frame) against ``truth2d`` (F, J, 2)."""
+    index = {n: k for k, n in enumerate(EVAL_JOINTS)}
+    errors, swaps, judged = [], 0, 0
+    for det, truth in zip(detections, truth2d):
+        if det is None:
+            continue
+        found = det.by_point(0.3)
+        errors += [np.hypot(*(np.array(found[n][:2]) - truth[index[n]])) for n in LIMB_JOINTS if n in found]
+        if all(n in found for pair in PAIRS for n in pair):
+            straight = sum(np.hypot(*(np.array(found[n][:2]) - truth[index[n]])) for pair in PAIRS for n in pair)
+            crossed = sum(np.hypot(*(np.array(found[a][:2]) - truth[index[b]])) +
+                          np.hypot(*(np.array(found[b][:2]) - truth[index[a]])) for a, b in PAIRS)
+            judged += 1
+            swaps += crossed < straight
+    return (float(np.median(errors)) if errors else None), (swaps / judged if judged else None)
+
+
+def track_cell(cell: Cell, mode: str, folder: Path, assets: Path, tracker: dict, frames: int = 0) -> dict:
+    """Track ``folder`` (its first ``frames``; 0 = all) in ``mode`` with the cell's detector;
+    the record of the module doc."""
+    spec = DETECTORS[cell.detector].format(assets=assets)
+    config = ServiceConfig(source=str(folder), detector=spec, body=f"makehuman:{assets}/bodies/makehuman",
+                           shape=cell.sequence.shape, tracker=TrackerConfig(mode=mode, **tracker), overlay=False)
+    summary = RunSummary()
+    estimates, detections, lost = [], [], 0
+    with ExitStack() as stack:
+        parts = open_parts(config, stack, score=False)
+        truth_of = parts.source.ground_truth
+        intrinsics = parts.source.intrinsics
+        done = []
+        for result in results(parts.source, parts.pipeline, frames, summary):
+            body = result.bodies[0] if result.bodies else None
+            found = body is not None and body.state != "lost"
+            lost += not found
+            estimates.append(body.joints3d if found else np.full((len(EVAL_JOINTS), 3), np.nan))
+            detections.append(body.detection if body is not None else None)
+            done.append(result.index)
+    truth = truth_of.joints3d[[truth_of.row(f) for f in done]]
+    estimates = np.asarray(estimates, float)
+    score = summarise(joint_errors(estimates, truth))
+    facing = facing_errors_deg(estimates, truth)
+    known = np.isfinite(facing)
+    px, swapped = detector_errors(detections, intrinsics.project(truth.reshape(-1, 3)).reshape(*truth.shape[:2], 2))
+    return {"cell": cell.name, "mode": mode, **asdict(cell.sequence), "detector": cell.detector,
+            "frames": len(done), "mpjpe_mm": score["mpjpe_mm"], "A100": score["A"][100], "lost": lost,
+            "facing_deg": float(np.mean(facing[known])) if known.any() else None,
+            "facing_ok": float(np.mean(facing[known] <= FACING_OK_DEG)) if known.any() else 0.0,
+            "detector_px": px, "swapped": swapped, "fps": summary.fps, **tracker}
+
+
+def run_matrix(out: Path, *, subset: str = "full", detectors: tuple[str, ...] | None = None,
+               modes: tuple[str, ...] = MODES, frames: int = 40, tracker: dict | None = None,
+               assets: str | Path | None = None, progress: bool = True) -> list[dict]:
+    """Every (cell, mode) record of the matrix (computed, or read back from ``out/results``)."""
+    if frames < 2:
+        raise ConfigError(f"--frames must be at least 2, got {frames}")
+    bad = [m for m in modes if m not in MODES]
+    if bad:
+        raise ConfigError(f"unknown mode {bad[0]!r}; choose from {', '.join(MODES)}")
+    root = find_assets(assets).resolve()
+    tracker = dict(tracker or {})
+    out = Path(out)
+    (out / "results").mkdir(parents=True, exist_ok=True)
+    todo = [(cell, mode) for cell in cells(subset, detectors) for mode in modes]
+    records = []
+    with progress_bar("bench accuracy", len(todo), enabled=progress) as bar:
+        for cell, mode in todo:
+            path = out / "results" / f"{cell.name}-{mode}.json"
+            record = _read_record(path, frames, tracker)
+            if record is None:
+                folder = make_sequence(cell.sequence, out / "sequences" / cell.sequence.name, frames, root)
+                record = track_cell(cell, mode, folder, root, tracker, frames)
+                tmp = path.with_suffix(".tmp")
+                tmp.write_text(json.dumps(record))
+                os.replace(tmp, path)
+                log.info("%s %s: %.1f mm", cell.name, mode, record["mpjpe_mm"] or float("nan"))
+            records.append(record)
+            bar.update(1)
+    return records
+
+
+def _read_record(path: Path, frames: int, tracker: dict) -> dict | None:
+    """The record stored at ``path`` if it was made with the same frames and tracker settings."""
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    if record.get("frames") != frames or any(record.get(k) != v for k, v in tracker.items()):
+        return None
+    return record

@@ -1,0 +1,105 @@
+"""The cells of the accuracy benchmark: which views, motions, shapes and detectors it crosses.
+
+The full cross product (5 yaws x 2 camera placements x 5 motions x 4 shapes x 3 detectors)
+is 600 sequences-with-a-detector, days of CPU. The matrix samples it so that every yaw meets
+every detector and every motion meets three yaws:
+
+* sequence k = 3·i + j (yaw i of :data:`YAWS`, j = 0, 1, 2) films motion
+  ``MOTIONS[(i + 2·j) % 5]`` on shape ``SHAPES[k % 4]`` from placement
+  ``PLACEMENTS[(i + j) % 2]``: 15 sequences, each motion under 3 different yaws, each shape
+  3-4 times, both placements under every yaw but one;
+* each sequence is tracked with every detector of :data:`DETECTORS`: 45 cells;
+* each cell in every mode of :data:`MODES`.
+
+``subset="regression"`` is the small set ``make test`` runs: the walk seen from the side
+(90°) and from behind (180°), MoveNet.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from swarmpose.core.errors import ConfigError
+
+YAWS: tuple[int, ...] = (0, 45, 90, 135, 180)
+"""Camera yaw around the subject (degrees; 0 = in front, 180 = behind)."""
+
+PLACEMENTS: tuple[tuple[float, float], ...] = ((1.2, 3.0), (2.2, 4.0))
+"""(lens height above the floor, distance from the subject) in metres: tripod, and wall-mounted."""
+
+MOTIONS: dict[str, str] = {
+    "walk": "mocap/bvh11_131_01.bvh",
+    "hop": "mocap/animdrawings_fair1_jumping.bvh",
+    "jumps-turns": "mocap/fairmotion_01_01.bvh",
+    "jumping-jacks": "mocap/animdrawings_cmu1_jumping_jacks.bvh",
+    "dance": "mocap/animdrawings_rokoko_jesse_dance.bvh",
+}
+"""Motion name -> BVH clip below the shared assets folder."""
+
+SHAPES: tuple[str, ...] = ("male", "female", "male-heavy", "female-tall")
+"""MakeHuman shape presets of the subjects (the tracker uses the subject's own shape)."""
+
+DETECTORS: dict[str, str] = {
+    "simulated": "simulated",
+    "movenet": "onnx:{assets}/pose2d/movenet_singlepose_lightning.onnx",
+    "blazepose": "onnx:{assets}/pose2d/blazepose_landmark_full.onnx",
+}
+"""Detector name -> detector spec ({assets}: the shared assets folder)."""
+
+MODES: tuple[str, ...] = ("hybrid", "joints", "depth", "lift")
+
+SUBSETS = ("full", "regression")
+
+
+@dataclass(frozen=True)
+class Sequence:
+    """One synthetic sequence of the matrix: motion, subject shape and camera."""
+
+    motion: str
+    shape: str
+    yaw_deg: int
+    camera_height: float
+    camera_distance: float
+
+    @property
+    def name(self) -> str:
+        return (f"{self.motion}-{self.shape}-yaw{self.yaw_deg:03d}"
+                f"-h{self.camera_height:.1f}-d{self.camera_distance:.1f}")
+
+
+@dataclass(frozen=True)
+class Cell:
+    """A sequence tracked with one detector (in every mode)."""
+
+    sequence: Sequence
+    detector: str
+
+    @property
+    def name(self) -> str:
+        return f"{self.sequence.name}-{self.detector}"
+
+
+def sequences(subset: str = "full") -> list[Sequence]:
+    """The matrix's sequences (see the module docstring)."""
+    if subset not in SUBSETS:
+        raise ConfigError(f"unknown benchmark subset {subset!r}; choose one of {', '.join(SUBSETS)}")
+    if subset == "regression":
+        height, distance = PLACEMENTS[0]
+        return [Sequence("walk", "male", yaw, height, distance) for yaw in (90, 180)]
+    motions = list(MOTIONS)
+    out = []
+    for i, yaw in enumerate(YAWS):
+        for j in range(3):
+            k = 3 * i + j
+            height, distance = PLACEMENTS[(i + j) % 2]
+            out.append(Sequence(motions[(i + 2 * j) % len(motions)], SHAPES[k % len(SHAPES)], yaw, height, distance))
+    return out
+
+
+def cells(subset: str = "full", detectors: tuple[str, ...] | None = None) -> list[Cell]:
+    """Every (sequence, detector) of the subset; ``detectors`` limits them (names of :data:`DETECTORS`)."""
+    chosen = tuple(detectors) if detectors else (("movenet",) if subset == "regression" else tuple(DETECTORS))
+    unknown = [d for d in chosen if d not in DETECTORS]
+    if unknown:
+        raise ConfigError(f"unknown detector {unknown[0]!r} for the benchmark; choose from {', '.join(DETECTORS)}")
+    return [Cell(seq, det) for seq in sequences(subset) for det in chosen]
