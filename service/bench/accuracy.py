@@ -22,9 +22,10 @@ from __future__ import annotations
 import json
 import logging
 import os
+import shutil
 from contextlib import ExitStack
 from dataclasses import asdict
-from functools import lru_cache
+from functools import lru_cache, partial
 from pathlib import Path
 
 import numpy as np
@@ -66,9 +67,16 @@ def make_sequence(seq: Sequence, folder: Path, frames: int, assets: Path) -> Pat
     config = SynthConfig(frames=frames, camera_yaw_deg=float(seq.yaw_deg), camera_height=seq.camera_height,
                          camera_distance=seq.camera_distance)
     tmp = folder.with_name(folder.name + ".partial")
+    shutil.rmtree(tmp, ignore_errors=True)  # left by an interrupted run
     synthesize(body, motion, tmp, config, description={"benchmark": asdict(seq)}, progress=False)
+    shutil.rmtree(folder, ignore_errors=True)  # too short for this run's --frames
     tmp.rename(folder)
     return folder
+
+
+def _pixel_gap(found: dict, truth: np.ndarray, index: dict[str, int], detected: str, true: str) -> float:
+    """Pixels between the detected keypoint ``detected`` and the true projection of joint ``true``."""
+    return float(np.hypot(*(np.array(found[detected][:2]) - truth[index[true]])))
 
 
 def detector_errors(detections: list, truth2d: np.ndarray) -> tuple[float | None, float | None]:
@@ -80,13 +88,11 @@ def detector_errors(detections: list, truth2d: np.ndarray) -> tuple[float | None
         if det is None:
             continue
         found = det.by_point(0.3)
-        errors += [np.hypot(*(np.array(found[n][:2]) - truth[index[n]])) for n in LIMB_JOINTS if n in found]
+        gap = partial(_pixel_gap, found, truth, index)
+        errors += [gap(n, n) for n in LIMB_JOINTS if n in found]
         if all(n in found for pair in PAIRS for n in pair):
-            straight = sum(np.hypot(*(np.array(found[n][:2]) - truth[index[n]])) for pair in PAIRS for n in pair)
-            crossed = sum(np.hypot(*(np.array(found[a][:2]) - truth[index[b]])) +
-                          np.hypot(*(np.array(found[b][:2]) - truth[index[a]])) for a, b in PAIRS)
             judged += 1
-            swaps += crossed < straight
+            swaps += sum(gap(a, b) + gap(b, a) for a, b in PAIRS) < sum(gap(a, a) + gap(b, b) for a, b in PAIRS)
     return (float(np.median(errors)) if errors else None), (swaps / judged if judged else None)
 
 

@@ -39,7 +39,7 @@ from swarmpose.gpu.scorer import ParticleScorer
 from swarmpose.gpu.tile import box_around
 from swarmpose.sources.base import Frame
 from swarmpose.tracking import search, verdict
-from swarmpose.tracking.config import TrackerConfig
+from swarmpose.tracking.config import MODE_WEIGHTS, TrackerConfig
 from swarmpose.tracking.init_pose import FACINGS_DEG, torso_pose, turned
 from swarmpose.tracking.lift import lift_eval_joints
 from swarmpose.tracking.objective import JointTargets, Objective
@@ -48,9 +48,6 @@ from swarmpose.tracking.result import BodyResult, lost_body
 
 HISTORY = 5
 """Previous solutions injected as particles."""
-
-HYBRID_RATIO = 3.0
-"""w_D / w_J of the hybrid mode: the start weighs the joints at least this much in depth mode."""
 
 
 class BodyTracker:
@@ -191,8 +188,10 @@ class BodyTracker:
         if targets.count == 0:
             return [centre]
         t = time.perf_counter()
-        weights = replace(self.weights, joints=max(self.weights.joints, self.weights.depth / HYBRID_RATIO))
-        start_objective = Objective(self.body, self.intrinsics, self.objective.scorer, weights)
+        w_d, w_j = MODE_WEIGHTS["hybrid"]  # depth mode: the joints weigh as much as in hybrid
+        weights = replace(self.weights, joints=max(self.weights.joints, self.weights.depth * w_j / w_d))
+        start_objective = (self.objective if weights == self.weights
+                           else Objective(self.body, self.intrinsics, self.objective.scorer, weights))
         start_objective.set_frame(depth, self._box(centre, targets), targets, centre)
         # joints only (no depth) converges slower from a wrong facing: twice the generations
         budget = (generations or self.config.generations) * (1 if self.weights.depth > 0 else 2)

@@ -24,6 +24,7 @@ sweep in BENCHMARKS.md):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -81,14 +82,15 @@ class JointTargets:
     def count(self) -> int:
         return len(self.names)
 
-    @property
+    @cached_property
     def extent_px(self) -> float:
         """The person's size in pixels: the diagonal of the detected joints' box (0 with fewer than two)."""
         return float(np.linalg.norm(np.ptp(self.xy, axis=0))) if self.count > 1 else 0.0
 
-    @property
+    @cached_property
     def pairs(self) -> np.ndarray:
-        """(m, 2) indices of the targets that form a left/right pair (left first)."""
+        """(m, 2) indices of the targets that form a left/right pair (left first); computed once
+        per frame (the joint term asks every generation)."""
         index = {n: i for i, n in enumerate(self.names)}
         found = [(i, index["right_" + n[5:]]) for n, i in index.items()
                  if n.startswith("left_") and "right_" + n[5:] in index]
@@ -189,8 +191,10 @@ class Objective:
                     + np.linalg.norm(projected[:, right] - xy[right], axis=2))
         crossed = (np.linalg.norm(projected[:, right] - xy[left], axis=2)
                    + np.linalg.norm(projected[:, left] - xy[right], axis=2) + 2 * self._swap_px)
-        order = np.repeat(np.arange(self.targets.count)[None], len(projected), axis=0)
         swap = crossed < straight
+        if not swap.any():
+            return None
+        order = np.repeat(np.arange(self.targets.count)[None], len(projected), axis=0)
         order[:, left] = np.where(swap, right, left)
         order[:, right] = np.where(swap, left, right)
         return order

@@ -71,3 +71,16 @@ def test_the_matrix_crosses_every_yaw_with_every_detector_and_motion_with_three_
     assert all(len(y) == 3 for y in yaws_of.values()) and len(yaws_of) == 5
     assert len({s.shape for s in sequences("full")}) == 4
     assert len({(s.camera_height, s.camera_distance) for s in sequences("full")}) == 2
+
+
+@needs_assets
+def test_a_sequence_too_short_for_the_run_is_rendered_again(tmp_path):
+    from swarmpose.bench.accuracy import make_sequence
+
+    seq = sequences("regression")[0]
+    folder = tmp_path / seq.name
+    make_sequence(seq, folder, 2, ASSETS)
+    (tmp_path / f"{seq.name}.partial").mkdir()  # what an interrupted rendering leaves
+    make_sequence(seq, folder, 3, ASSETS)
+    assert len((folder / "groundtruth.jsonl").read_text().splitlines()) == 3
+    assert len(list((folder / "depth").glob("*.png"))) == 3
