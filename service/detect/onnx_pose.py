@@ -27,6 +27,14 @@ black padding, resized to the network's input:
   from frame to frame like MediaPipe's tracking mode; without either (first frame, or
   after the pose flag said the person was lost), the whole frame padded to a square.
 
+Where a network would see the whole frame (no box, nothing to follow), it runs twice when
+``refine`` is on (the default): once on the whole frame, then on the square around the
+keypoints it found there (score > ``REFINE_MIN_SCORE``), keeping the pass with the higher
+mean keypoint score. A person who fills a fifth of a
+640x480 frame covers ~40 of MoveNet's 192 input pixels in the first pass and most of them in
+the second, which is where its keypoints become usable (see BENCHMARKS.md, issue 12). The
+second pass costs one inference, on the first frame and after a loss only.
+
 Keypoints come back in frame pixels (the centre of the top-left pixel at (0, 0)).
 """
 
@@ -47,6 +55,9 @@ DEFAULT_MARGIN = 1.25
 
 PREVIOUS_MIN_SCORE = 0.5
 """Keypoints of the previous detection above this score define the next BlazePose crop."""
+
+REFINE_MIN_SCORE = 0.2
+"""Keypoints of a whole-frame pass above this score define the crop of the second pass."""
 
 
 def default_threads() -> int:
@@ -204,14 +215,15 @@ class OnnxPoseDetector:
 
     model: path of the ``.onnx`` file; adapter: ``"movenet"``, ``"blazepose"`` or None (pick
     from the model's shapes); threads: onnxruntime intra-op threads (None:
-    :func:`default_threads`); margin: box enlargement into the crop square.
+    :func:`default_threads`); margin: box enlargement into the crop square; refine: a
+    whole-frame detection is followed by a second pass on the crop around what it found.
     ``detect(frame, box)`` returns :class:`Joints2D` in frame pixels (see the module doc for crops).
     Raises :class:`DetectorError` naming the file for a missing or unreadable model, or one
     whose shapes no adapter supports.
     """
 
     def __init__(self, model: str | Path, adapter: str | None = None, threads: int | None = None,
-                 margin: float = DEFAULT_MARGIN):
+                 margin: float = DEFAULT_MARGIN, refine: bool = True):
         import onnxruntime as ort
 
         self.path = Path(model).expanduser()
@@ -248,6 +260,7 @@ class OnnxPoseDetector:
                 raise DetectorError(f"ONNX model {self.path} has {found}, not what adapter {adapter!r} needs "
                                     f"(supported: {SUPPORTED})")
         self.adapter = chosen(inputs, outputs, margin)
+        self.refine = bool(refine)
         self.layout: KeypointLayout = chosen.layout
         self.name = f"onnx:{self.path.name}"
 
@@ -263,7 +276,14 @@ class OnnxPoseDetector:
                                 f"{image.shape} {image.dtype}")
         box = None if box is None else np.asarray(box, dtype=np.float64).reshape(4)
         try:
+            whole = box is None and getattr(self.adapter, "previous", None) is None
             keypoints = self.adapter.run(self.session, image, box)
+            found = keypoint_box(keypoints, REFINE_MIN_SCORE) if whole and self.refine else None
+            if found is not None:
+                refined = self.adapter.run(self.session, image, found)
+                keypoints = refined if refined[:, 2].mean() >= keypoints[:, 2].mean() else keypoints
+                if getattr(self.adapter, "previous", None) is not None:
+                    self.adapter.previous = keypoints
         except DetectorError:
             raise
         except Exception as exc:

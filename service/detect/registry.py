@@ -4,7 +4,7 @@ Forms:
 
 * ``simulated``: the detections ``swarmpose synth`` recorded (the source must be a synth
   sequence folder, whose ``ground_truth`` attribute holds them);
-* ``onnx:MODEL[?adapter=movenet|blazepose&threads=N&margin=F]``: an ONNX pose network
+* ``onnx:MODEL[?adapter=movenet|blazepose&threads=N&margin=F&refine=BOOL]``: an ONNX pose network
   (MoveNet single-pose or BlazePose full landmark), see :mod:`.onnx_pose`;
 * ``openpose-json:DIR[?layout=body25|openpose18]``: OpenPose ``--write_json`` files, see :mod:`.openpose_json`.
 
@@ -19,8 +19,18 @@ from urllib.parse import parse_qsl
 from swarmpose.core.errors import ConfigError
 from swarmpose.detect.joints import Detector
 
-FORMS = ("simulated", "onnx:MODEL[?adapter=movenet|blazepose&threads=N&margin=F]",
+FORMS = ("simulated", "onnx:MODEL[?adapter=movenet|blazepose&threads=N&margin=F&refine=BOOL]",
          "openpose-json:DIR[?layout=body25|openpose18]")
+
+
+def boolean(text: str) -> bool:
+    """``true/false``, ``yes/no``, ``on/off`` or ``1/0`` (any case) -> bool; ValueError otherwise."""
+    value = text.strip().lower()
+    if value in ("true", "yes", "on", "1"):
+        return True
+    if value in ("false", "no", "off", "0"):
+        return False
+    raise ValueError(text)
 
 
 def _split_options(spec: str, rest: str, allowed: dict[str, type]) -> tuple[str, dict]:
@@ -54,7 +64,8 @@ def make_detector(spec: str, source=None) -> Detector:
     if spec.startswith("onnx:"):
         from swarmpose.detect.onnx_pose import OnnxPoseDetector
 
-        path, opts = _split_options(spec, spec[5:], {"adapter": str, "threads": int, "margin": float})
+        path, opts = _split_options(spec, spec[5:], {"adapter": str, "threads": int, "margin": float,
+                                                                  "refine": boolean})
         return OnnxPoseDetector(path, **opts)
     if spec.startswith("openpose-json:"):
         from swarmpose.detect.openpose_json import OpenPoseJsonDetector

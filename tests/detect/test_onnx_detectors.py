@@ -102,16 +102,29 @@ def test_blazepose_on_the_coco_photo_with_the_annotated_box(blazepose, photo):
 
 
 @needs_assets
-def test_blazepose_without_a_box_follows_its_previous_detection(blazepose, photo):
-    """First call: whole photo (measured 11.4 px); the next crops around those keypoints (measured 6.1 px)."""
+def test_blazepose_without_a_box_follows_its_previous_detection(photo):
+    """Without the second pass: the first call sees the whole photo (measured 11.4 px), the
+    next crops around those keypoints (measured 6.1 px)."""
+    frame, truth, _ = photo
+    single = OnnxPoseDetector(BLAZEPOSE, refine=False)
+    first = single.detect(frame)
+    second = single.detect(frame)
+    assert np.median(_coco_errors(second, truth)) < BLAZEPOSE_COCO_BOUND_PX
+    assert np.median(_coco_errors(first, truth)) > np.median(_coco_errors(second, truth))
+    single.reset()
+    np.testing.assert_allclose(single.detect(frame).keypoints, first.keypoints, atol=1e-4)
+
+
+@needs_assets
+def test_blazepose_refines_its_first_whole_frame_detection_on_a_crop(blazepose, photo):
+    """With the second pass (the default) the first call is as good as the followed one of the
+    single-pass detector: measured 6.3 px against 11.4 px for the whole photo alone."""
     frame, truth, _ = photo
     blazepose.reset()
     first = blazepose.detect(frame)
-    second = blazepose.detect(frame)
-    assert np.median(_coco_errors(second, truth)) < BLAZEPOSE_COCO_BOUND_PX
-    assert np.median(_coco_errors(first, truth)) > np.median(_coco_errors(second, truth))
-    blazepose.reset()
-    np.testing.assert_allclose(blazepose.detect(frame).keypoints, first.keypoints, atol=1e-4)
+    whole = OnnxPoseDetector(BLAZEPOSE, refine=False).detect(frame)
+    assert np.median(_coco_errors(first, truth)) < BLAZEPOSE_COCO_BOUND_PX
+    assert np.median(_coco_errors(first, truth)) < np.median(_coco_errors(whole, truth)) - 2
 
 
 @needs_assets
@@ -124,6 +137,40 @@ def test_blazepose_reports_nobody_on_an_empty_frame_and_forgets_the_crop(blazepo
     whole = blazepose.detect(frame)
     blazepose.detect(_frame(np.zeros((480, 640, 3), np.uint8), index=1))
     np.testing.assert_allclose(blazepose.detect(frame).keypoints, whole.keypoints, atol=1e-4)
+
+
+@pytest.fixture(scope="module")
+def far_side_render(tmp_path_factory):
+    """One synth frame of the MakeHuman body walking (CMU 131_01), seen from its side at 4 m from
+    2.2 m up (the accuracy benchmark's wall-mounted placement): about 150 px tall in 640x480."""
+    from swarmpose.body.loader import load_body
+    from swarmpose.motion.library import load_motion_spec
+    from swarmpose.sim.synth import SynthConfig, synthesize
+
+    out = tmp_path_factory.mktemp("side")
+    body = load_body(f"makehuman:{MAKEHUMAN}")
+    motion = load_motion_spec(str(ASSETS / "mocap" / "bvh11_131_01.bvh"), body, 1, 30.0)
+    synthesize(body, motion, out, SynthConfig(frames=1, camera_yaw_deg=90.0, camera_height=2.2,
+                                              camera_distance=4.0), progress=False)
+    record = json.loads((out / "groundtruth.jsonl").read_text().splitlines()[0])
+    return _frame(_read_rgb(out / "color" / "000000.png"), 0, record["timestamp_ns"]), record
+
+
+def _limb_errors(joints, record) -> np.ndarray:
+    found = joints.by_point(min_score=0.0)
+    truth = {k: v for k, v in record["joints2d"].items() if k in COCO17.keypoints}
+    return np.array([np.hypot(found[k][0] - x, found[k][1] - y) for k, (x, y) in truth.items() if k in found])
+
+
+@needs_assets
+def test_movenet_refines_a_small_person_on_a_crop(far_side_render):
+    """A small person seen from the side: the whole frame alone gives a median error of
+    14.7 px over the 12 limb joints, the second pass on the crop around it 6.7 px (measured)."""
+    frame, record = far_side_render
+    whole = _limb_errors(OnnxPoseDetector(MOVENET, refine=False).detect(frame), record)
+    crop = _limb_errors(OnnxPoseDetector(MOVENET).detect(frame), record)
+    assert len(crop) == 12
+    assert np.median(crop) < np.median(whole)
 
 
 @pytest.fixture(scope="module")
