@@ -77,11 +77,12 @@ class BodyResult:
                             self.confidence, self.objective, detection)
 
 
-def lost_body(reason: str, body_id: int = 0, timings_ms: Mapping[str, float] | None = None) -> BodyResult:
-    """A body with no estimate (state lost) and why."""
+def lost_body(reason: str, body_id: int = 0, timings_ms: Mapping[str, float] | None = None,
+              detection: Joints2D | None = None) -> BodyResult:
+    """A body with no estimate (state lost), why, and the detection it was lost with (if any)."""
     n = len(EVAL_JOINTS)
     return BodyResult(body_id, "lost", reason, None, np.full((n, 3), np.nan), np.full((n, 2), np.nan),
-                      np.zeros(n), {}, dict(timings_ms or {}))
+                      np.zeros(n), {}, dict(timings_ms or {}), detection)
 
 
 @dataclass(frozen=True)

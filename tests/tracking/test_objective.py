@@ -120,6 +120,22 @@ def test_torso_pose_recovers_root(body):
     assert torso_pose(body, {"left_hip": pts[0]}, body.rest_angles) is None
 
 
+def test_torso_pose_of_an_upper_body_assumes_it_upright(body):
+    """Only the shoulders seen (hips out of the frame): an upright body facing the camera from
+    any yaw is recovered within 3 cm at the torso."""
+    from scipy.spatial.transform import Rotation
+
+    for yaw in (0.0, 40.0, 150.0):
+        q_scipy = (Rotation.from_euler("y", yaw, degrees=True) * Rotation.from_euler("x", 180, degrees=True)).as_quat()
+        h = body.rest_pose((0.1, 0.2, 1.5), np.r_[q_scipy[3], q_scipy[:3]])
+        pts = body.posed_points(h[None], ("left_shoulder", "right_shoulder"))[0]
+        est = torso_pose(body, dict(zip(("left_shoulder", "right_shoulder"), pts)), body.rest_angles)
+        torso = ("left_hip", "right_hip", "left_shoulder", "right_shoulder", "neck")
+        gap = np.linalg.norm(body.posed_points(est[None], torso)[0] - body.posed_points(h[None], torso)[0], axis=1)
+        assert np.max(gap) < 0.03, (yaw, gap)
+    assert torso_pose(body, {"left_shoulder": pts[0]}, body.rest_angles) is None
+
+
 def test_bad_weights():
     with pytest.raises(ConfigError):
         ObjectiveWeights(depth=0.0, joints=0.0)
