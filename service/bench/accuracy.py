@@ -24,7 +24,7 @@ import logging
 import os
 import shutil
 from contextlib import ExitStack
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from functools import lru_cache, partial
 from pathlib import Path
 
@@ -96,19 +96,28 @@ def detector_errors(detections: list, truth2d: np.ndarray) -> tuple[float | None
     return (float(np.median(errors)) if errors else None), (swaps / judged if judged else None)
 
 
-def track_cell(cell: Cell, mode: str, folder: Path, assets: Path, tracker: dict, frames: int = 0) -> dict:
-    """Track ``folder`` (its first ``frames``; 0 = all) in ``mode`` with the cell's detector;
-    the record of the module doc."""
-    spec = DETECTORS[cell.detector].format(assets=assets)
-    config = ServiceConfig(source=str(folder), detector=spec, body=f"makehuman:{assets}/bodies/makehuman",
-                           shape=cell.sequence.shape, tracker=TrackerConfig(mode=mode, **tracker), overlay=False)
+@dataclass
+class TrackedRun:
+    """One source tracked against its ground truth: estimates and truth (F, J, 3) m in
+    ``EVAL_JOINTS`` order (NaN rows where the body was lost), the detections (Joints2D or
+    None per frame), lost frames, the run's summary and the camera."""
+
+    estimates: np.ndarray
+    truth: np.ndarray
+    detections: list
+    lost: int
+    summary: RunSummary
+    intrinsics: object
+
+
+def track_with_truth(config: ServiceConfig, frames: int = 0) -> TrackedRun:
+    """Track ``config``'s source (its first ``frames``; 0 = all) and collect estimates beside its ground truth."""
     summary = RunSummary()
-    estimates, detections, lost = [], [], 0
+    estimates, detections, done, lost = [], [], [], 0
     with ExitStack() as stack:
-        parts = open_parts(config, stack, score=False)
+        parts = open_parts(config, stack, score=False, need_ground_truth=True)
         truth_of = parts.source.ground_truth
         intrinsics = parts.source.intrinsics
-        done = []
         for result in results(parts.source, parts.pipeline, frames, summary):
             body = result.bodies[0] if result.bodies else None
             found = body is not None and body.state != "lost"
@@ -117,16 +126,32 @@ def track_cell(cell: Cell, mode: str, folder: Path, assets: Path, tracker: dict,
             detections.append(body.detection if body is not None else None)
             done.append(result.index)
     truth = truth_of.joints3d[[truth_of.row(f) for f in done]]
-    estimates = np.asarray(estimates, float)
-    score = summarise(joint_errors(estimates, truth))
-    facing = facing_errors_deg(estimates, truth)
+    return TrackedRun(np.asarray(estimates, float).reshape(-1, len(EVAL_JOINTS), 3), truth, detections, lost,
+                      summary, intrinsics)
+
+
+def scores(run: TrackedRun) -> dict:
+    """Δ, A(100), lost frames, torso facing and the detector's 2D errors of a tracked run (the module doc's fields)."""
+    score = summarise(joint_errors(run.estimates, run.truth))
+    facing = facing_errors_deg(run.estimates, run.truth)
     known = np.isfinite(facing)
-    px, swapped = detector_errors(detections, intrinsics.project(truth.reshape(-1, 3)).reshape(*truth.shape[:2], 2))
-    return {"cell": cell.name, "mode": mode, **asdict(cell.sequence), "detector": cell.detector,
-            "frames": len(done), "mpjpe_mm": score["mpjpe_mm"], "A100": score["A"][100], "lost": lost,
+    truth2d = run.intrinsics.project(run.truth.reshape(-1, 3)).reshape(*run.truth.shape[:2], 2)
+    px, swapped = detector_errors(run.detections, truth2d)
+    return {"frames": len(run.estimates), "mpjpe_mm": score["mpjpe_mm"], "A100": score["A"][100], "lost": run.lost,
             "facing_deg": float(np.mean(facing[known])) if known.any() else None,
             "facing_ok": float(np.mean(facing[known] <= FACING_OK_DEG)) if known.any() else 0.0,
-            "detector_px": px, "swapped": swapped, "fps": summary.fps, **tracker}
+            "detector_px": px, "swapped": swapped, "fps": run.summary.fps}
+
+
+def track_cell(cell: Cell, mode: str, folder: Path, assets: Path, tracker: dict, frames: int = 0) -> dict:
+    """Track ``folder`` (its first ``frames``; 0 = all) in ``mode`` with the cell's detector;
+    the record of the module doc."""
+    spec = DETECTORS[cell.detector].format(assets=assets)
+    config = ServiceConfig(source=str(folder), detector=spec, body=f"makehuman:{assets}/bodies/makehuman",
+                           shape=cell.sequence.shape, tracker=TrackerConfig(mode=mode, **tracker), overlay=False)
+    run = track_with_truth(config, frames)
+    return {"cell": cell.name, "mode": mode, **asdict(cell.sequence), "detector": cell.detector,
+            **scores(run), **tracker}
 
 
 def run_matrix(out: Path, *, subset: str = "full", detectors: tuple[str, ...] | None = None,

@@ -1,4 +1,4 @@
-"""``swarmpose bench score|detect|accuracy``: the benchmarks BENCHMARKS.md records."""
+"""``swarmpose bench score|detect|accuracy|utdmhad``: the benchmarks BENCHMARKS.md records."""
 
 from __future__ import annotations
 
@@ -10,7 +10,11 @@ from swarmpose.bench.accuracy import run_matrix
 from swarmpose.bench.accuracy_report import format_summary, format_table, plot_heatmap
 from swarmpose.bench.detect import bench_detectors, format_detect_bench
 from swarmpose.bench.matrix import DETECTORS, MODES, SUBSETS
+from swarmpose.bench.qualitative import write_overlays
 from swarmpose.bench.score import bench_score, format_bench
+from swarmpose.bench.utdmhad import ACTIONS, SHAPES, SUBJECTS, run_utdmhad
+from swarmpose.bench.utdmhad import format_table as format_utdmhad_table
+from swarmpose.bench.utdmhad import summary as utdmhad_summary
 from swarmpose.cli.common import DEFAULTS, add_body_options, positive_int, quiet
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import parse_size
@@ -66,6 +70,37 @@ def cmd_bench_accuracy(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_utdmhad(args: argparse.Namespace) -> int:
+    """The tracker on UTD-MHAD's real Kinect sequences against the Kinect skeleton."""
+    tracker = {"particles": args.particles, "generations": args.generations}
+    records = run_utdmhad(Path(args.out), modes=args.modes, detectors=args.detectors, shapes=args.shapes,
+                          frames=args.frames, tracker=tracker, subjects=args.subjects,
+                          actions=tuple(int(a) for a in args.actions), assets=args.assets,
+                          progress=not quiet(args))
+    out = Path(args.out)
+    overall = utdmhad_summary(records)
+    table = format_utdmhad_table(records)
+    (out / "table.md").write_text(table)
+    (out / "records.json").write_text(json.dumps(records, indent=1))
+    if args.json:
+        print(json.dumps({"out": str(out), "summary": overall, "records": records}))
+    else:
+        lines = [f"{name}: Δ {v['mpjpe_mm']:.1f} mm, with the joint offsets {v['mpjpe_offset_mm'] or float('nan'):.1f} "
+                 f"mm over {v['sequences']} sequences ({v['frames']} frames, {v['lost']} lost)"
+                 for name, v in overall.items()]
+        print(table + "\n" + "\n".join(lines) + f"\nrecords and table.md in {out}")
+    return 0
+
+
+def cmd_bench_overlays(args: argparse.Namespace) -> int:
+    """Overlay pictures of the tracker on the real Kinect frames without ground truth."""
+    settings = {"particles": args.particles, "generations": args.generations}
+    report = write_overlays(Path(args.out), detector=args.detector, assets=args.assets, settings=settings)
+    print(json.dumps(report) if args.json else "\n".join(
+        f"{args.out}/{name}: {', '.join(r['states'])}" for name, r in report.items()))
+    return 0
+
+
 def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     """Register ``bench score`` and ``bench detect``."""
     bench = sub.add_parser("bench", help="benchmarks").add_subparsers(dest="bench", required=True, metavar="BENCH")
@@ -105,3 +140,33 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
                    help="shared assets folder (default: $SWARMPOSE_ASSETS or ../shared/assets)")
     p.add_argument("--json", action="store_true", help="one JSON object with every record")
     p.set_defaults(func=cmd_bench_accuracy)
+    p = bench.add_parser("utdmhad", parents=[common], formatter_class=DEFAULTS,
+                         help="the tracker on UTD-MHAD's real Kinect depth against its skeletons (resumable)")
+    p.add_argument("--out", required=True, help="folder of the per-sequence results and the table; run again "
+                                                "to resume")
+    p.add_argument("--modes", type=_names(MODES), default=("hybrid",), help="comma-separated tracker modes")
+    p.add_argument("--detectors", type=_names(tuple(DETECTORS)), default=("simulated",),
+                   help="comma-separated: simulated (from the Kinect skeleton) and/or networks on the shaded depth")
+    p.add_argument("--shapes", type=_names(SHAPES), default=("default",),
+                   help="default: the body's default shape; measured: the height measured on the first frame")
+    p.add_argument("--subjects", type=_names(SUBJECTS), default=SUBJECTS, help="comma-separated subjects")
+    p.add_argument("--actions", type=_names(tuple(str(a) for a in ACTIONS)), default=(),
+                   help="comma-separated action numbers 1..27 (default: all)")
+    p.add_argument("--frames", type=int, default=0, help="first frames of each sequence (0 = all)")
+    p.add_argument("--particles", type=positive_int, default=64, help="PSO particles")
+    p.add_argument("--generations", type=positive_int, default=64, help="PSO generations")
+    p.add_argument("--assets", default=None,
+                   help="shared assets folder (default: $SWARMPOSE_ASSETS or ../shared/assets)")
+    p.add_argument("--json", action="store_true", help="one JSON object with the summary and every record")
+    p.set_defaults(func=cmd_bench_utdmhad)
+    p = bench.add_parser("overlays", parents=[common], formatter_class=DEFAULTS,
+                         help="overlay pictures of the tracker on real Kinect frames without ground truth")
+    p.add_argument("--out", default="docs/qualitative", help="folder of the pictures")
+    p.add_argument("--detector", choices=[d for d in DETECTORS if d != "simulated"], default="movenet",
+                   help="2D network")
+    p.add_argument("--particles", type=positive_int, default=64, help="PSO particles")
+    p.add_argument("--generations", type=positive_int, default=64, help="PSO generations")
+    p.add_argument("--assets", default=None,
+                   help="shared assets folder (default: $SWARMPOSE_ASSETS or ../shared/assets)")
+    p.add_argument("--json", action="store_true", help="one JSON object")
+    p.set_defaults(func=cmd_bench_overlays)

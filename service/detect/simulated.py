@@ -102,36 +102,54 @@ def simulate_detections(layout: KeypointLayout, points: dict[str, np.ndarray], d
 
 
 class SimulatedDetector:
-    """``--detector simulated``: replays the detections ``swarmpose synth`` recorded in ``groundtruth.jsonl``.
+    """``--detector simulated``: the noise model above applied to a source's ground truth.
 
-    ground_truth: the sequence's :class:`~swarmpose.sources.groundtruth.GroundTruth` (a folder
-    source's ``.ground_truth``). ``detect(frame)`` returns the keypoints (K, 3) x px, y px,
-    score that the noise model above produced for ``frame.index`` at synth time; ``box`` is ignored.
+    ground_truth: the sequence's :class:`~swarmpose.sources.groundtruth.GroundTruth` (a
+    folder or ``utdmhad:`` source's ``.ground_truth``). ``detect(frame)`` returns keypoints
+    (K, 3) x px, y px, score: those ``swarmpose synth`` recorded for ``frame.index``, or,
+    where the ground truth records none but holds true 2D points (``points2d``, e.g. a
+    UTD-MHAD Kinect skeleton), COCO-17 keypoints drawn from them now with
+    :class:`SimulatedNoise` defaults (seeded by ``seed`` and the frame; keypoints of points
+    the ground truth lacks, such as the face, are missing). ``box`` is ignored.
     """
 
-    def __init__(self, ground_truth, source_name: str = "the source"):
+    def __init__(self, ground_truth, source_name: str = "the source", seed: int = 0):
         if ground_truth is None:
             raise DetectorError(f"--detector simulated needs a `swarmpose synth` sequence folder with "
-                                f"groundtruth.jsonl as --source; {source_name} has no ground truth. Use "
-                                "--detector onnx:MODEL.onnx or --detector openpose-json:DIR for other sources")
+                                f"groundtruth.jsonl (or a utdmhad: file) as --source; {source_name} has no ground "
+                                "truth. Use --detector onnx:MODEL.onnx or --detector openpose-json:DIR for other "
+                                "sources")
+        self.ground_truth = ground_truth
+        self.name = "simulated"
+        self.source_name = source_name
+        self.seed = int(seed)
         layouts = {d[0] for d in ground_truth.detections if d is not None}
+        self.from_points = not layouts and bool(ground_truth.points2d)
+        if self.from_points:
+            self.layout = LAYOUTS["coco17"]
+            return
         if not layouts:
             raise DetectorError(f"the ground truth of {source_name} records no simulated detections; "
                                 "re-run `swarmpose synth` to rewrite the sequence")
         if len(layouts) > 1:
             raise DetectorError(f"the ground truth of {source_name} mixes keypoint layouts {sorted(layouts)}")
-        self.ground_truth = ground_truth
         self.layout = LAYOUTS[layouts.pop()]
-        self.name = "simulated"
-        self.source_name = source_name
 
     def detect(self, frame, box: np.ndarray | None = None) -> Joints2D:
         """The recorded detections of ``frame.index`` as :class:`~swarmpose.detect.joints.Joints2D`."""
         try:
-            det = self.ground_truth.detections[self.ground_truth.row(int(frame.index))]
+            row = self.ground_truth.row(int(frame.index))
         except KeyError:
             raise DetectorError(f"simulated: {self.source_name} has no ground-truth record for frame "
                                 f"{frame.index}") from None
+        if self.from_points:
+            points = self.ground_truth.points2d[row]
+            size = person_size(np.array(list(points.values()), dtype=np.float64).reshape(-1, 2))
+            drawn = simulate_detections(self.layout, points, {}, size, frame.intrinsics, SimulatedNoise(),
+                                        self.seed, int(frame.index))
+            keypoints = np.array([drawn[k] for k in self.layout.keypoints], dtype=np.float64)
+            return Joints2D(self.layout, keypoints, int(frame.index), int(frame.timestamp_ns))
+        det = self.ground_truth.detections[row]
         keypoints = np.zeros((len(self.layout.keypoints), 3)) if det is None else np.array(det[1], dtype=np.float64)
         return Joints2D(self.layout, keypoints, int(frame.index), int(frame.timestamp_ns))
 

@@ -56,8 +56,9 @@ class Tracker:
                  source: FrameSource | None = None, config: TrackerConfig | None = None, **settings: Any):
         self.config = with_settings(config or TrackerConfig(), **settings)
         if isinstance(detector, str) and detector.strip() == "simulated" and source is None:
-            raise ConfigError("the simulated detector replays the detections a `swarmpose synth` sequence recorded, "
-                              "so it needs that sequence: pass source=swarmpose.open_source('folder:SEQ'), or a "
+            raise ConfigError("the simulated detector draws its keypoints from a source's ground truth (a "
+                              "`swarmpose synth` sequence or a UTD-MHAD file), so it needs that source: pass "
+                              "source=swarmpose.open_source('folder:SEQ'), or a "
                               "detector for other frames, e.g. detector='onnx:movenet.onnx' or "
                               "detector='openpose-json:DIR'")
         if isinstance(body, SkinnedBody):

@@ -18,7 +18,7 @@ from swarmpose.tracking.config import TrackerConfig
 
 ZENOH_MODES = ("peer", "client", "off")
 SOURCE_FORMS = ("folder:DIR, rgbd:C.png,D.png,K.json, mkv:FILE, bag:FILE, openni2:[FILE.oni|URI], "
-                "realsense:[SERIAL], azure:[INDEX], or a bare folder / recording file")
+                "utdmhad:aA_sS_tT_depth.mat, realsense:[SERIAL], azure:[INDEX], or a bare folder / recording file")
 
 
 @dataclass(frozen=True)

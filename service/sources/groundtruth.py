@@ -26,13 +26,16 @@ class GroundTruth:
 
     poses: (F, 36); joints3d: (F, J, 3) metres, camera frame, in ``EVAL_JOINTS`` order
     (NaN where a record lacks a joint); detections: per frame the simulated detector's
-    (layout name, (K, 3) keypoints).
+    (layout name, (K, 3) keypoints) recorded at synth time, or None; points2d: per frame
+    the true pixel positions (2,) of body points (name -> px), from which the simulated
+    detector draws keypoints where none were recorded (empty: none).
     """
 
     frames: tuple[int, ...]
     poses: np.ndarray
     joints3d: np.ndarray
     detections: tuple[tuple[str, np.ndarray] | None, ...]
+    points2d: tuple[dict[str, np.ndarray], ...] = ()
 
     @cached_property
     def _rows(self) -> dict[int, int]:

@@ -14,8 +14,10 @@ Schemes (``scheme:argument``):
   the colour intrinsics instead of reading the factory calibration) (:mod:`.open3d_io`).
 * ``openni2:`` — the first OpenNI2 device; ``openni2:FILE.oni`` plays a recording;
   ``openni2:URI`` opens a device by its OpenNI URI (:mod:`.openni2`).
+* ``utdmhad:FILE.mat`` — a UTD-MHAD depth file (``aA_sS_tT_depth.mat``) with its Kinect
+  skeleton as ground truth (:mod:`.utdmhad`).
 
-A bare path to a ``.mkv``, ``.bag`` or ``.oni`` file is read with that file's scheme.
+A bare path to a ``.mkv``, ``.bag``, ``.oni`` or ``.mat`` file is read with that file's scheme.
 
 Errors: an unknown scheme or a malformed argument raises :class:`~swarmpose.core.errors.ConfigError`
 listing the schemes; a missing file, device or library raises
@@ -42,13 +44,15 @@ SCHEMES = {
     "realsense": "realsense:[SERIAL|CONFIG.json] (live RealSense)",
     "azure": "azure:[INDEX][,INTRINSICS.json] (live Azure Kinect)",
     "openni2": "openni2:[FILE.oni|URI] (OpenNI2 device or recording)",
+    "utdmhad": "utdmhad:aA_sS_tT_depth.mat (UTD-MHAD depth with its Kinect skeleton)",
 }
-_BY_SUFFIX = {".mkv": "mkv", ".bag": "bag", ".oni": "openni2"}
+_BY_SUFFIX = {".mkv": "mkv", ".bag": "bag", ".oni": "openni2", ".mat": "utdmhad"}
 
 _HINTS = {
     "mkv": "record one with the Azure Kinect's k4arecorder",
     "bag": "record one with the RealSense Viewer (realsense-viewer)",
     "openni2": "record one with OpenNI2's NiViewer or openni2.Recorder",
+    "utdmhad": "pass PATH/aA_sS_tT_depth.mat of UTD-MHAD",
 }
 
 
@@ -109,4 +113,8 @@ def open_source(uri: str) -> FrameSource:
         if arg.lower().endswith(".oni"):
             return OpenNI2Source(file=_existing_file(arg, "openni2"), uri=uri)
         return OpenNI2Source(device_uri=arg or None, uri=uri)
+    if scheme == "utdmhad":
+        path = _existing_file(arg, "utdmhad")
+        from swarmpose.sources.utdmhad import UtdMhadSource
+        return UtdMhadSource(path, uri=uri)
     raise AssertionError(scheme)  # pragma: no cover - _split only returns known schemes

@@ -1,0 +1,117 @@
+"""``swarmpose bench overlays``: the tracker on real Kinect frames that have no ground truth,
+drawn for a person to judge (``docs/qualitative/``).
+
+* ``skeltrack.png``: the twelve raw Kinect v1 depth frames of ``rgbd/skeltrack_frames``
+  (upper bodies, one or two people, no colour) shaded as surfaces
+  (:func:`~swarmpose.sources.depth_shading.shaded_normals`), the 2D network run on that image,
+  each frame tracked on its own (a fresh start: no previous frame to follow);
+* ``five_people.png``: the real Kinect colour + depth frame of five people walking away from
+  the camera (``rgbd/kinect_five_people``), tracked with the network on the colour.
+
+White bones and confidence-coloured dots are the tracked model's joints, small cyan dots the
+network's keypoints (score >= 0.3). One person per frame: several people are issue 14.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from swarmpose.bench.detect import find_assets
+from swarmpose.bench.matrix import DETECTORS
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import SourceError
+from swarmpose.pipeline.api import Tracker
+from swarmpose.publish.overlay import background, caption, draw_skeleton
+from swarmpose.sources.base import Frame
+from swarmpose.sources.depth_shading import shaded_normals
+from swarmpose.sources.still import StillSource
+
+SKELTRACK = "rgbd/skeltrack_frames"
+FIVE_PEOPLE = "rgbd/kinect_five_people"
+KINECT_V1 = Intrinsics.kinect_v1()
+KEYPOINT_COLOR = (0, 255, 255)
+
+
+def read_raw_depth(path: Path, width: int = 640, height: int = 480) -> np.ndarray:
+    """A headerless little-endian uint16 millimetre depth file -> (height, width) float32 m."""
+    raw = np.fromfile(path, dtype="<u2")
+    if raw.size != width * height:
+        raise SourceError(f"{path} holds {raw.size} 16-bit values, not {width} x {height}; it is not a raw "
+                          "Kinect v1 depth frame")
+    return raw.reshape(height, width).astype(np.float32) / 1000.0
+
+
+def skeltrack_frames(assets: Path) -> list[Frame]:
+    """The Skeltrack frames, in name order, with the shaded depth as their colour image."""
+    paths = sorted((assets / SKELTRACK).glob("depth-data-*"))
+    frames = []
+    for i, path in enumerate(paths):
+        depth = read_raw_depth(path)
+        frames.append(Frame(i, 0, depth, shaded_normals(depth, KINECT_V1), KINECT_V1))
+    return frames
+
+
+def five_people_frame(assets: Path) -> Frame:
+    """The five-people frame (colour, registered depth, its intrinsics)."""
+    folder = assets / FIVE_PEOPLE
+    return StillSource(folder / "five_people_color.png", folder / "five_people_depth_mm.png",
+                       folder / "five_people_intrinsics.json").frame
+
+
+def draw(frame: Frame, result) -> np.ndarray:
+    """(H, W, 3) uint8: the frame's image with the tracked skeleton, the keypoints and the caption."""
+    import cv2
+
+    image = background(frame)
+    message = result.to_message()
+    for body in result.bodies:
+        if body.detection is not None:
+            for x, y, score in body.detection.keypoints:
+                if score >= 0.3:
+                    cv2.circle(image, (int(round(x)), int(round(y))), 2, KEYPOINT_COLOR, -1, cv2.LINE_AA)
+    for body in message.get("bodies") or []:
+        draw_skeleton(image, body)
+    text = caption(message)
+    cv2.putText(image, text, (5, image.shape[0] - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
+    return image
+
+
+def montage(images: list[np.ndarray], columns: int = 4, scale: float = 0.5) -> np.ndarray:
+    """Images (H, W, 3) of one size, shrunk by ``scale``, in a grid of ``columns`` (black padding)."""
+    import cv2
+
+    small = [cv2.resize(im, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA) for im in images]
+    h, w = small[0].shape[:2]
+    rows = -(-len(small) // columns)
+    grid = np.zeros((rows * h, columns * w, 3), np.uint8)
+    for k, im in enumerate(small):
+        r, c = divmod(k, columns)
+        grid[r * h:(r + 1) * h, c * w:(c + 1) * w] = im
+    return grid
+
+
+def write_overlays(out: Path, *, detector: str = "movenet", assets: str | Path | None = None,
+                   settings: dict | None = None) -> dict[str, dict]:
+    """Track and draw the frames (module doc) into ``out``; per picture, each frame's state and reason."""
+    import cv2
+
+    root = find_assets(assets).resolve()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    spec = DETECTORS[detector].format(assets=root)
+    report = {}
+    with Tracker(detector=spec, **(settings or {})) as tracker:
+        pictures = {"skeltrack.png": skeltrack_frames(root), "five_people.png": [five_people_frame(root)]}
+        for name, frames in pictures.items():
+            images, states = [], []
+            for frame in frames:
+                tracker.reset()
+                result = tracker.track_frame(frame)
+                images.append(draw(frame, result))
+                states.append(result.bodies[0].state if result.bodies else f"no body: {result.reason}")
+            picture = montage(images) if len(images) > 1 else images[0]
+            cv2.imwrite(str(out / name), picture[..., ::-1], [cv2.IMWRITE_PNG_COMPRESSION, 9])
+            report[name] = {"frames": len(frames), "states": states}
+    return report

@@ -1,0 +1,203 @@
+"""``swarmpose bench utdmhad``: the tracker on real Kinect data, UTD-MHAD subjects s1–s3.
+
+For every depth file of ``rgbd/utd_mhad/depth`` (27 actions x 3 subjects, trial 1) and every
+requested variant (mode x detector x shape), track the sequence (its first ``frames``) with
+the ``eval`` defaults unless told otherwise, and score it against the Kinect SDK skeleton
+(:mod:`swarmpose.sources.utdmhad`):
+
+* ``mpjpe_mm`` Δ over the 14 evaluation joints against the mapped Kinect joints, as is;
+* ``mpjpe_offset_mm`` Δ after subtracting, per joint, the mean difference (estimate −
+  Kinect, camera frame, m) measured on the *other two subjects* with the same variant
+  (leave-one-subject-out), which removes the constant part of the two skeletons' different
+  joint definitions (Kinect hips sit higher and wider, its shoulders lower) but not errors
+  that change with the pose — the subjects all face the camera, so a camera-frame offset is
+  a body-frame offset here;
+* ``A100``, lost frames, and the detector's median 2D error (px) on the limbs' joints.
+
+Detectors: ``simulated`` (the noise model applied to the projected Kinect skeleton; no face
+keypoints) and ``movenet`` / ``blazepose`` run on the depth shaded as a surface (there is no
+colour). Shapes: ``default`` (the body's default) and ``measured`` (the height measured on
+the first frame's depth, :func:`~swarmpose.sources.utdmhad.measured_height`).
+
+Each (sequence, variant) is one JSON record in ``OUT/results/`` with the per-frame
+estimates in a ``.npz`` beside it: an interrupted run resumes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+from swarmpose.bench.accuracy import scores, track_with_truth
+from swarmpose.bench.detect import find_assets
+from swarmpose.bench.matrix import DETECTORS, MODES
+from swarmpose.core.errors import ConfigError
+from swarmpose.core.progress import progress_bar
+from swarmpose.pipeline.config import ServiceConfig
+from swarmpose.sim.evaluate import joint_errors, summarise
+from swarmpose.sources.utdmhad import UtdMhadSource, measured_height
+from swarmpose.tracking.config import TrackerConfig
+
+FOLDER = "rgbd/utd_mhad/depth"
+SUBJECTS = ("s1", "s2", "s3")
+SHAPES = ("default", "measured")
+_NAME = re.compile(r"^a(\d+)_(s\d+)_t\d+_depth\.mat$")
+
+ACTIONS = {
+    1: "swipe left", 2: "swipe right", 3: "wave", 4: "clap", 5: "throw", 6: "arm cross", 7: "basketball shoot",
+    8: "draw x", 9: "draw circle (cw)", 10: "draw circle (ccw)", 11: "draw triangle", 12: "bowling", 13: "boxing",
+    14: "baseball swing", 15: "tennis swing", 16: "arm curl", 17: "tennis serve", 18: "push", 19: "knock",
+    20: "catch", 21: "pickup & throw", 22: "jog", 23: "walk", 24: "sit to stand", 25: "stand to sit",
+    26: "lunge", 27: "squat",
+}
+"""UTD-MHAD's 27 actions (from the dataset's paper)."""
+
+
+def sequences(assets: Path, subjects: tuple[str, ...] = SUBJECTS, actions: tuple[int, ...] = ()) -> list[Path]:
+    """The depth files of ``subjects`` (and ``actions``; empty: all), by action then subject;
+    ConfigError when there are none."""
+    folder = assets / FOLDER
+    found = sorted((p for p in folder.glob("*_depth.mat") if (m := _NAME.match(p.name)) and m.group(2) in subjects
+                    and (not actions or int(m.group(1)) in actions)),
+                   key=lambda p: (int(_NAME.match(p.name).group(1)), p.name))
+    if not found:
+        raise ConfigError(f"no UTD-MHAD depth files of subjects {', '.join(subjects)}"
+                          f"{' and actions ' + str(list(actions)) if actions else ''} in {folder}")
+    return found
+
+
+def variant_name(mode: str, detector: str, shape: str) -> str:
+    return f"{mode}-{detector}-{shape}"
+
+
+def track_sequence(path: Path, mode: str, detector: str, shape: str, assets: Path, tracker: dict,
+                   frames: int) -> tuple[dict, np.ndarray, np.ndarray]:
+    """(record, estimates (F, J, 3), truth (F, J, 3)) of one sequence in one variant."""
+    spec = DETECTORS[detector].format(assets=assets)
+    shape_spec = ""
+    height = None
+    if shape == "measured":
+        with UtdMhadSource(path) as source:
+            height = measured_height(source.depth[0], source.intrinsics)
+        shape_spec = f"height={height:.3f}"
+    config = ServiceConfig(source=f"utdmhad:{path}", detector=spec, shape=shape_spec,
+                           tracker=TrackerConfig(mode=mode, **tracker), overlay=False)
+    run = track_with_truth(config, frames)
+    match = _NAME.match(path.name)
+    record = {"sequence": path.name.removesuffix("_depth.mat"), "action": int(match.group(1)),
+              "subject": match.group(2), "mode": mode, "detector": detector, "shape": shape, "height_m": height,
+              "requested_frames": frames, **scores(run), **tracker}
+    return record, run.estimates, run.truth
+
+
+def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[str, ...] = ("simulated",),
+                shapes: tuple[str, ...] = ("default",), frames: int = 0, tracker: dict | None = None,
+                subjects: tuple[str, ...] = SUBJECTS, actions: tuple[int, ...] = (),
+                assets: str | Path | None = None,
+                progress: bool = True) -> list[dict]:
+    """Every (sequence, variant) record, computed or read back from ``out/results``, with
+    ``mpjpe_offset_mm`` filled in (see the module doc)."""
+    for name, given, allowed in (("mode", modes, MODES), ("detector", detectors, tuple(DETECTORS)),
+                                 ("shape", shapes, SHAPES)):
+        bad = [g for g in given if g not in allowed]
+        if bad:
+            raise ConfigError(f"unknown {name} {bad[0]!r}; choose from {', '.join(allowed)}")
+    if frames < 0:
+        raise ConfigError(f"--frames must be 0 (all) or more, got {frames}")
+    root = find_assets(assets).resolve()
+    tracker = dict(tracker or {})
+    results = Path(out) / "results"
+    results.mkdir(parents=True, exist_ok=True)
+    todo = [(path, m, d, s) for path in sequences(root, subjects, actions)
+            for m in modes for d in detectors for s in shapes]
+    records, arrays = [], []
+    with progress_bar("bench utdmhad", len(todo), enabled=progress, unit="sequence") as bar:
+        for path, mode, detector, shape in todo:
+            stem = f"{path.name.removesuffix('_depth.mat')}-{variant_name(mode, detector, shape)}"
+            stored = _read(results / stem, frames, tracker)
+            if stored is None:
+                record, estimates, truth = track_sequence(path, mode, detector, shape, root, tracker, frames)
+                np.savez(results / f"{stem}.npz", estimates=estimates, truth=truth)
+                tmp = results / f"{stem}.tmp"
+                tmp.write_text(json.dumps(record))
+                os.replace(tmp, results / f"{stem}.json")
+                stored = record, estimates, truth
+            records.append(stored[0])
+            arrays.append(stored[1:])
+            bar.update(1)
+    add_offset_scores(records, arrays)
+    return records
+
+
+def _read(stem: Path, frames: int, tracker: dict) -> tuple[dict, np.ndarray, np.ndarray] | None:
+    try:
+        record = json.loads(stem.with_suffix(".json").read_text())
+        with np.load(stem.with_suffix(".npz")) as data:
+            estimates, truth = data["estimates"], data["truth"]
+    except (OSError, ValueError, KeyError):
+        return None
+    if record.get("requested_frames") != frames or any(record.get(k) != v for k, v in tracker.items()):
+        return None
+    return record, estimates, truth
+
+
+def add_offset_scores(records: list[dict], arrays: list[tuple[np.ndarray, np.ndarray]]) -> None:
+    """Fill ``mpjpe_offset_mm`` of each record: Δ after the per-joint offset of the other subjects (same variant)."""
+    def variant(r: dict) -> tuple:
+        return r["mode"], r["detector"], r["shape"]
+
+    for record, (estimates, truth) in zip(records, arrays):
+        others = [a for r, a in zip(records, arrays)
+                  if variant(r) == variant(record) and r["subject"] != record["subject"]]
+        if not others:
+            record["mpjpe_offset_mm"] = None
+            continue
+        diff = np.concatenate([e - t for e, t in others])  # (frames, J, 3), NaN where a body was lost
+        seen = np.isfinite(diff)
+        offset = np.where(seen, diff, 0.0).sum(axis=0) / np.maximum(seen.sum(axis=0), 1)  # (J, 3); 0 if never seen
+        record["mpjpe_offset_mm"] = summarise(joint_errors(estimates - offset, truth))["mpjpe_mm"]
+
+
+def format_table(records: list[dict]) -> str:
+    """Markdown: per action, mean Δ (offset-corrected Δ) of each variant over the subjects; then all actions."""
+    variants = sorted({(r["mode"], r["detector"], r["shape"]) for r in records},
+                      key=lambda v: (MODES.index(v[0]), v[1], v[2]))
+    head = ["action"] + [f"{m} {d} {s}" for m, d, s in variants]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+
+    def cell(rows: list[dict]) -> str:
+        raw = [r["mpjpe_mm"] for r in rows if r["mpjpe_mm"] is not None]
+        fixed = [r["mpjpe_offset_mm"] for r in rows if r.get("mpjpe_offset_mm") is not None]
+        if not raw:
+            return "–"
+        return f"{np.mean(raw):.0f}" + (f" ({np.mean(fixed):.0f})" if fixed else "")
+
+    for action in sorted({r["action"] for r in records}):
+        row = [f"a{action} {ACTIONS.get(action, '')}".strip()]
+        row += [cell([r for r in records if r["action"] == action and (r["mode"], r["detector"], r["shape"]) == v])
+                for v in variants]
+        lines.append("| " + " | ".join(row) + " |")
+    lines.append("| **all** | " + " | ".join(
+        f"**{cell([r for r in records if (r['mode'], r['detector'], r['shape']) == v])}**" for v in variants) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def summary(records: list[dict]) -> dict[str, dict[str, float | None]]:
+    """Per variant: mean Δ, mean offset-corrected Δ, sequences, frames, lost frames, detector px."""
+    out = {}
+    for v in sorted({(r["mode"], r["detector"], r["shape"]) for r in records}):
+        rows = [r for r in records if (r["mode"], r["detector"], r["shape"]) == v]
+
+        def mean(key: str, rows=rows) -> float | None:
+            values = [r[key] for r in rows if r.get(key) is not None]
+            return float(np.mean(values)) if values else None
+
+        out[variant_name(*v)] = {"mpjpe_mm": mean("mpjpe_mm"), "mpjpe_offset_mm": mean("mpjpe_offset_mm"),
+                                 "sequences": len(rows), "frames": int(sum(r["frames"] for r in rows)),
+                                 "lost": int(sum(r["lost"] for r in rows)), "detector_px": mean("detector_px")}
+    return out
+

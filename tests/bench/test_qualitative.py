@@ -1,0 +1,56 @@
+"""``swarmpose bench overlays``: the real frames without ground truth are read, tracked and drawn."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import ASSETS, needs_assets
+
+from swarmpose.bench.qualitative import draw, five_people_frame, montage, read_raw_depth, skeltrack_frames
+from swarmpose.core.errors import SourceError
+from swarmpose.pipeline.api import Tracker
+
+MOVENET = ASSETS / "pose2d" / "movenet_singlepose_lightning.onnx"
+
+
+@needs_assets
+def test_the_real_frames_are_read_with_their_depth_in_metres():
+    frames = skeltrack_frames(ASSETS)
+    assert len(frames) == 12
+    for frame in frames:
+        valid = frame.depth[frame.depth > 0]
+        assert frame.depth.shape == (480, 640) and frame.color.shape == (480, 640, 3)
+        assert 0.5 < np.median(valid) < 2.0  # upper bodies in front of a cut-off background
+    five = five_people_frame(ASSETS)
+    assert five.color.shape == (480, 640, 3) and 1.5 < np.median(five.depth[five.depth > 0]) < 10
+
+
+def test_a_raw_file_of_the_wrong_size_is_refused(tmp_path):
+    path = tmp_path / "depth-data-1"
+    np.zeros(100, "<u2").tofile(path)
+    with pytest.raises(SourceError, match="depth-data-1 holds 100 16-bit values"):
+        read_raw_depth(path)
+
+
+def test_montage_lays_images_out_in_a_grid():
+    images = [np.full((40, 60, 3), k, np.uint8) for k in range(5)]
+    grid = montage(images, columns=2, scale=0.5)
+    assert grid.shape == (60, 60, 3)
+    assert grid[0, 0, 0] == 0 and grid[0, 30, 0] == 1 and grid[40, 0, 0] == 4 and grid[40, 30, 0] == 0
+
+
+@needs_assets
+def test_an_upper_body_without_hips_in_view_is_tracked_from_its_shoulders():
+    """Skeltrack frame 1 (hips out of the frame): tracked, and the model's shoulders project
+    within 25 px of MoveNet's on the shaded depth."""
+    frame = skeltrack_frames(ASSETS)[1]
+    with Tracker(detector=f"onnx:{MOVENET}", particles=16, generations=8) as tracker:
+        result = tracker.track_frame(frame)
+    body = result.bodies[0]
+    assert body.state == "init", body.reason
+    found = body.detection.by_point(0.3)
+    for name in ("left_shoulder", "right_shoulder"):
+        pixel = body.to_message()["joints"][name]["pixel"]
+        assert np.hypot(pixel[0] - found[name][0], pixel[1] - found[name][1]) < 25, name
+    image = draw(frame, result)
+    assert image.shape == (480, 640, 3) and np.any(np.all(image == (255, 255, 255), axis=-1))
