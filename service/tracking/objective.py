@@ -14,10 +14,10 @@ sweep in BENCHMARKS.md):
   between the model's points (projected for 2D) and the detected 2D joints j^e / their lift
   J^e, with w = 0.2 for hips, 1.8 for wrists and ankles, 1 otherwise; joints missing from
   the detection, below ``min_score`` or without depth drop out of their term.
-  *Design change:* in ``E_J3D`` a model joint farther along its lift's viewing ray than the
-  lift pays only its distance across the ray: J^e is the depth surface at the keypoint, and
-  an occluded joint (the far arm in a side view) lies behind it; the symmetric distance
-  pulled the far arm 20-30 cm towards the camera.
+  The lift of an occluded joint is the occluder's surface (the far arm of a person seen from
+  the side lifts onto the torso, 20-30 cm in front of the arm); a one-sided 3D distance
+  (free behind the lift) for every joint, or for the joints the previous solution hides,
+  was measured and not kept: it made front views worse (BENCHMARKS.md, issue 12).
 * ``E_J = α·E_J2D + (1 − α)·E_J3D``, α = 0.97.
 * ``E_P`` in **centimetres** (:meth:`Objective.penetration_cm`): how deep the elbows and
   wrists sink into the torso's core, a capsule from the hips' middle to the shoulders'
@@ -137,25 +137,16 @@ class JointTargets:
 
 
 def weighted_joint_distance(model: np.ndarray, target: np.ndarray, weight: np.ndarray,
-                            order: np.ndarray | None = None, swap_cost: float = 0.0,
-                            behind_free: bool = False) -> np.ndarray:
+                            order: np.ndarray | None = None, swap_cost: float = 0.0) -> np.ndarray:
     """(P,) weighted mean distance between model points (P, n, k) and targets (n, k); rows of
     ``target`` with NaN drop out. 0 when no target is usable. order: (P, n) which model point
     each target is matched with (None: the same index); a target matched with another index
-    than its own adds ``swap_cost`` to its distance. behind_free (3D camera-frame points
-    only): a model point farther along the target's viewing ray than the target pays only
-    its distance across the ray — a lifted joint is the depth surface at its pixel, which an
-    occluded joint (an arm behind the torso in a side view) lies behind."""
+    than its own adds ``swap_cost`` to its distance."""
     ok = np.all(np.isfinite(target), axis=1)
     if not np.any(ok):
         return np.zeros(len(model))
     matched = model if order is None else np.take_along_axis(model, order[..., None], axis=1)
-    gap = matched[:, ok] - target[ok]
-    if behind_free:
-        ray = target[ok] / np.maximum(np.linalg.norm(target[ok], axis=1, keepdims=True), 1e-9)
-        along = np.einsum("pnk,nk->pn", gap, ray)
-        gap = gap - np.maximum(along, 0.0)[..., None] * ray
-    d = np.linalg.norm(gap, axis=2)
+    d = np.linalg.norm(matched[:, ok] - target[ok], axis=2)
     if order is not None:
         d += swap_cost * (order[:, ok] != np.flatnonzero(ok))
     w = weight[ok]
@@ -263,8 +254,7 @@ class Objective:
             projected = pts[..., :2] / z * f + c
             order = self._assignment(projected)
             e_2d = weighted_joint_distance(projected, self.targets.xy, self.targets.weight, order, self._swap_px)
-            e_3d = 1000.0 * weighted_joint_distance(pts, self.targets.xyz, self.targets.weight, order,
-                                                    behind_free=True)
+            e_3d = 1000.0 * weighted_joint_distance(pts, self.targets.xyz, self.targets.weight, order)
         e_j = w.alpha * e_2d + (1.0 - w.alpha) * e_3d
         e_p = self.penetration_cm(transforms) if w.penetration > 0 else zeros
         total = w.depth * e_d + w.joints * e_j + w.penetration * e_p
