@@ -48,6 +48,10 @@ from swarmpose.tracking.lift import lift_detection
 SWAP_COST = 0.05
 """Cost of matching a detected left/right pair crossed, per joint, as a share of the person's size."""
 
+IMAGE_MARGIN = 0.5
+"""Keypoints up to this share of the image's width/height outside it still count (a foot cut
+off by the frame's edge); farther ones are ignored."""
+
 ARM_POINTS = ("left_elbow", "right_elbow", "left_wrist", "right_wrist")
 """The points :attr:`Objective.penetration_cm` keeps out of the torso."""
 
@@ -122,10 +126,15 @@ class JointTargets:
     @classmethod
     def from_detection(cls, joints: Joints2D | None, depth: np.ndarray, intrinsics: Intrinsics,
                        body: SkinnedBody, min_score: float = 0.3) -> JointTargets:
-        """Targets from a detection: its body points with score >= ``min_score``, lifted on ``depth``."""
+        """Targets from a detection: its body points with score >= ``min_score`` that lie within
+        :data:`IMAGE_MARGIN` image sizes of the image (a keypoint farther out is a detector's
+        failure, not a joint), lifted on ``depth``."""
         if joints is None:
             return cls.empty()
-        points = {k: v for k, v in joints.by_point().items() if v[2] >= min_score and k in body.point_names}
+        w, h = intrinsics.width, intrinsics.height
+        points = {k: v for k, v in joints.by_point().items() if v[2] >= min_score and k in body.point_names
+                  and -IMAGE_MARGIN * w <= v[0] <= (1 + IMAGE_MARGIN) * w
+                  and -IMAGE_MARGIN * h <= v[1] <= (1 + IMAGE_MARGIN) * h}
         if not points:
             return cls.empty()
         lifted = lift_detection(depth, intrinsics, joints, min_score)

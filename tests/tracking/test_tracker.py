@@ -113,3 +113,24 @@ def test_no_person_then_recovery(body, sequence):
     assert r.state == "lost" and r.reason
     with pytest.raises(TrackingError):
         tracker.step(Frame(3, 0, np.zeros((10, 10), np.float32), None, intr), det)
+
+
+def test_an_absurd_detection_does_not_stop_the_track(body, sequence):
+    """Keypoints at NaN, at infinity and a million pixels away, all with high scores: the frame
+    is tracked on what is left (depth), without an exception, and the next good detection
+    keeps the track."""
+    intr = Intrinsics.load(sequence / "intrinsic.json")
+    tracker = BodyTracker(body, intr, TrackerConfig(**SMALL))
+    (frame, det), (frame1, _), (frame2, det2) = list(frames_of(sequence))[:3]
+    assert tracker.step(frame, det).state == "init"
+    keypoints = np.zeros_like(det.keypoints)
+    keypoints[:, 2] = 0.95
+    keypoints[0::3, :2] = np.nan
+    keypoints[1::3, :2] = np.inf
+    keypoints[2::3, :2] = 1e6
+    absurd = tracker.step(frame1, Joints2D(det.layout, keypoints, 1, 0))
+    assert absurd.state == "tracking" and np.all(np.isfinite(absurd.joints3d))
+    after = tracker.step(frame2, det2)
+    assert after.state == "tracking"
+    truth = load_ground_truth(sequence).joints3d[2]
+    assert 1000 * np.mean(np.linalg.norm(after.joints3d - truth, axis=1)) < 120
