@@ -34,8 +34,10 @@ from swarmpose.bench.detect import find_assets
 from swarmpose.bench.matrix import DETECTORS, MODES, MOTIONS, Cell, Sequence, cells
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import EVAL_JOINTS
+from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.progress import progress_bar
+from swarmpose.detect.joints import Joints2D
 from swarmpose.motion.library import load_motion_spec
 from swarmpose.pipeline.config import ServiceConfig
 from swarmpose.pipeline.run import RunSummary, results
@@ -104,10 +106,10 @@ class TrackedRun:
 
     estimates: np.ndarray
     truth: np.ndarray
-    detections: list
+    detections: list[Joints2D | None]
     lost: int
     summary: RunSummary
-    intrinsics: object
+    intrinsics: Intrinsics
 
 
 def track_with_truth(config: ServiceConfig, frames: int = 0) -> TrackedRun:

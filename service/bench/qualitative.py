@@ -27,6 +27,7 @@ from swarmpose.publish.overlay import background, caption, draw_skeleton
 from swarmpose.sources.base import Frame
 from swarmpose.sources.depth_shading import shaded_normals
 from swarmpose.sources.still import StillSource
+from swarmpose.tracking.result import FrameResult
 
 SKELTRACK = "rgbd/skeltrack_frames"
 FIVE_PEOPLE = "rgbd/kinect_five_people"
@@ -60,7 +61,7 @@ def five_people_frame(assets: Path) -> Frame:
                        folder / "five_people_intrinsics.json").frame
 
 
-def draw(frame: Frame, result) -> np.ndarray:
+def draw(frame: Frame, result: FrameResult) -> np.ndarray:
     """(H, W, 3) uint8: the frame's image with the tracked skeleton, the keypoints and the caption."""
     import cv2
 
@@ -108,6 +109,8 @@ def write_overlays(out: Path, *, detector: str = "movenet", assets: str | Path |
             images, states = [], []
             for frame in frames:
                 tracker.reset()
+                if hasattr(tracker.detector, "reset"):  # BlazePose would crop around the last frame
+                    tracker.detector.reset()
                 result = tracker.track_frame(frame)
                 images.append(draw(frame, result))
                 states.append(result.bodies[0].state if result.bodies else f"no body: {result.reason}")

@@ -1,6 +1,7 @@
 """``swarmpose bench utdmhad``: the tracker on real Kinect data, UTD-MHAD subjects s1–s3.
 
-For every depth file of ``rgbd/utd_mhad/depth`` (27 actions x 3 subjects, trial 1) and every
+For every depth file of ``rgbd/utd_mhad/depth`` (27 actions x 3 subjects; every trial
+there, and the assets hold trial 1) and every
 requested variant (mode x detector x shape), track the sequence (its first ``frames``) with
 the ``eval`` defaults unless told otherwise, and score it against the Kinect SDK skeleton
 (:mod:`swarmpose.sources.utdmhad`):
@@ -8,19 +9,23 @@ the ``eval`` defaults unless told otherwise, and score it against the Kinect SDK
 * ``mpjpe_mm`` Δ over the 14 evaluation joints against the mapped Kinect joints, as is;
 * ``mpjpe_offset_mm`` Δ after subtracting, per joint, the mean difference (estimate −
   Kinect, camera frame, m) measured on the *other two subjects* with the same variant
-  (leave-one-subject-out), which removes the constant part of the two skeletons' different
-  joint definitions (Kinect hips sit higher and wider, its shoulders lower) but not errors
-  that change with the pose — the subjects all face the camera, so a camera-frame offset is
-  a body-frame offset here;
+  (leave-one-subject-out, over the sequences of this run), which removes the constant part
+  of the two skeletons' different joint definitions (Kinect hips sit higher and wider, its
+  shoulders lower) but not errors that change with the pose — the subjects all face the
+  camera, so a camera-frame offset is a body-frame offset here;
 * ``A100``, lost frames, and the detector's median 2D error (px) on the limbs' joints.
 
 Detectors: ``simulated`` (the noise model applied to the projected Kinect skeleton; no face
 keypoints) and ``movenet`` / ``blazepose`` run on the depth shaded as a surface (there is no
-colour). Shapes: ``default`` (the body's default) and ``measured`` (the height measured on
-the first frame's depth, :func:`~swarmpose.sources.utdmhad.measured_height`).
+colour). Shapes: ``default`` (the body's default) and ``measured`` (the subject's height:
+the median over the subject's sequences of the height measured on their first frame's
+depth, :func:`~swarmpose.sources.utdmhad.measured_height`; a median, because a few actions
+begin seated).
 
 Each (sequence, variant) is one JSON record in ``OUT/results/`` with the per-frame
-estimates in a ``.npz`` beside it: an interrupted run resumes.
+estimates in a ``.npz`` beside it, both written whole or not at all: an interrupted run
+resumes. A record is reused when its frames, particles and generations match; after a
+change to the tracker, use a fresh ``--out``.
 """
 
 from __future__ import annotations
@@ -28,6 +33,9 @@ from __future__ import annotations
 import json
 import os
 import re
+import zipfile
+import zlib
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -71,7 +79,21 @@ def sequences(assets: Path, subjects: tuple[str, ...] = SUBJECTS, actions: tuple
 
 
 def variant_name(mode: str, detector: str, shape: str) -> str:
+    """``mode-detector-shape``: a variant's name in file names and summaries."""
     return f"{mode}-{detector}-{shape}"
+
+
+@cache
+def subject_height(folder: Path, subject: str) -> float:
+    """A UTD-MHAD subject's height (m): the median over the subject's depth files in ``folder``
+    of :func:`measured_height` on their first frame."""
+    heights = []
+    for path in sorted(folder.glob(f"*_{subject}_t*_depth.mat")):
+        with UtdMhadSource(path) as source:
+            heights.append(measured_height(source.depth[0], source.intrinsics))
+    if not heights:
+        raise ConfigError(f"no UTD-MHAD depth files of subject {subject} in {folder}")
+    return float(np.median(heights))
 
 
 def track_sequence(path: Path, mode: str, detector: str, shape: str, assets: Path, tracker: dict,
@@ -81,8 +103,7 @@ def track_sequence(path: Path, mode: str, detector: str, shape: str, assets: Pat
     shape_spec = ""
     height = None
     if shape == "measured":
-        with UtdMhadSource(path) as source:
-            height = measured_height(source.depth[0], source.intrinsics)
+        height = subject_height(path.parent, _NAME.match(path.name).group(2))
         shape_spec = f"height={height:.3f}"
     config = ServiceConfig(source=f"utdmhad:{path}", detector=spec, shape=shape_spec,
                            tracker=TrackerConfig(mode=mode, **tracker), overlay=False)
@@ -109,7 +130,7 @@ def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[s
     if frames < 0:
         raise ConfigError(f"--frames must be 0 (all) or more, got {frames}")
     root = find_assets(assets).resolve()
-    tracker = dict(tracker or {})
+    tracker = {"particles": 64, "generations": 64, **(tracker or {})}  # stored, so a resume compares them
     results = Path(out) / "results"
     results.mkdir(parents=True, exist_ok=True)
     todo = [(path, m, d, s) for path in sequences(root, subjects, actions)
@@ -121,7 +142,9 @@ def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[s
             stored = _read(results / stem, frames, tracker)
             if stored is None:
                 record, estimates, truth = track_sequence(path, mode, detector, shape, root, tracker, frames)
-                np.savez(results / f"{stem}.npz", estimates=estimates, truth=truth)
+                tmp = results / f"{stem}.tmp.npz"
+                np.savez(tmp, estimates=estimates, truth=truth)
+                os.replace(tmp, results / f"{stem}.npz")
                 tmp = results / f"{stem}.tmp"
                 tmp.write_text(json.dumps(record))
                 os.replace(tmp, results / f"{stem}.json")
@@ -134,15 +157,19 @@ def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[s
 
 
 def _read(stem: Path, frames: int, tracker: dict) -> tuple[dict, np.ndarray, np.ndarray] | None:
+    """(record, estimates, truth) stored under ``stem`` (.json, .npz) for these frames and
+    tracker settings; None when absent, made otherwise, or unreadable."""
     try:
         record = json.loads(stem.with_suffix(".json").read_text())
-        with np.load(stem.with_suffix(".npz")) as data:
-            estimates, truth = data["estimates"], data["truth"]
-    except (OSError, ValueError, KeyError):
+    except (OSError, ValueError):
         return None
     if record.get("requested_frames") != frames or any(record.get(k) != v for k, v in tracker.items()):
         return None
-    return record, estimates, truth
+    try:
+        with np.load(stem.with_suffix(".npz")) as data:
+            return record, data["estimates"], data["truth"]
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error):
+        return None
 
 
 def add_offset_scores(records: list[dict], arrays: list[tuple[np.ndarray, np.ndarray]]) -> None:

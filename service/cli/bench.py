@@ -1,4 +1,4 @@
-"""``swarmpose bench score|detect|accuracy|utdmhad``: the benchmarks BENCHMARKS.md records."""
+"""``swarmpose bench score|detect|accuracy|utdmhad|overlays``: the benchmarks BENCHMARKS.md records."""
 
 from __future__ import annotations
 
@@ -85,9 +85,11 @@ def cmd_bench_utdmhad(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps({"out": str(out), "summary": overall, "records": records}))
     else:
-        lines = [f"{name}: Δ {v['mpjpe_mm']:.1f} mm, with the joint offsets {v['mpjpe_offset_mm'] or float('nan'):.1f} "
-                 f"mm over {v['sequences']} sequences ({v['frames']} frames, {v['lost']} lost)"
-                 for name, v in overall.items()]
+        def mm(value: float | None) -> str:
+            return "–" if value is None else f"{value:.1f}"
+
+        lines = [f"{name}: Δ {mm(v['mpjpe_mm'])} mm, with the joint offsets {mm(v['mpjpe_offset_mm'])} mm over "
+                 f"{v['sequences']} sequences ({v['frames']} frames, {v['lost']} lost)" for name, v in overall.items()]
         print(table + "\n" + "\n".join(lines) + f"\nrecords and table.md in {out}")
     return 0
 
@@ -102,7 +104,7 @@ def cmd_bench_overlays(args: argparse.Namespace) -> int:
 
 
 def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
-    """Register ``bench score`` and ``bench detect``."""
+    """Register ``bench score``, ``detect``, ``accuracy``, ``utdmhad`` and ``overlays``."""
     bench = sub.add_parser("bench", help="benchmarks").add_subparsers(dest="bench", required=True, metavar="BENCH")
     p = bench.add_parser("score", parents=[common], formatter_class=DEFAULTS,
                          help="OpenCL scorer vs the Open3D ray-casting baseline, hypotheses per second")

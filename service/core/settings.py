@@ -22,6 +22,14 @@ from swarmpose.core.errors import ConfigError
 
 KINDS = ("str", "int", "float", "bool", "list", "size", "float?")
 _TRUE, _FALSE = {"1", "true", "yes", "on"}, {"0", "false", "no", "off", ""}
+
+
+def parse_bool(text: str) -> bool:
+    """``1/true/yes/on`` or ``0/false/no/off/''`` (any case, spaces ignored) -> bool; ValueError otherwise."""
+    value = str(text).strip().lower()
+    if value in _TRUE | _FALSE:
+        return value in _TRUE
+    raise ValueError(text)
 _NONE = {"", "none", "null", "auto"}
 T = TypeVar("T")
 
@@ -115,10 +123,7 @@ def convert(name: str, kind: str, value: Any, origin: str) -> Any:
         if kind == "bool":
             if isinstance(value, bool):
                 return value
-            text = str(value).strip().lower()
-            if text in _TRUE | _FALSE:
-                return text in _TRUE
-            raise ValueError
+            return parse_bool(value)
         if kind == "size":
             if isinstance(value, (list, tuple)) and len(value) == 2:
                 value = f"{value[0]}x{value[1]}"

@@ -282,8 +282,8 @@ class OnnxPoseDetector:
             if found is not None:
                 refined = self.adapter.run(self.session, image, found)
                 keypoints = refined if refined[:, 2].mean() >= keypoints[:, 2].mean() else keypoints
-                if getattr(self.adapter, "previous", None) is not None:
-                    self.adapter.previous = keypoints
+                if hasattr(self.adapter, "previous"):  # follow what is returned (None: nobody)
+                    self.adapter.previous = keypoints if keypoints[:, 2].any() else None
         except DetectorError:
             raise
         except Exception as exc:

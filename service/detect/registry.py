@@ -17,20 +17,11 @@ from __future__ import annotations
 from urllib.parse import parse_qsl
 
 from swarmpose.core.errors import ConfigError
+from swarmpose.core.settings import parse_bool
 from swarmpose.detect.joints import Detector
 
 FORMS = ("simulated", "onnx:MODEL[?adapter=movenet|blazepose&threads=N&margin=F&refine=BOOL]",
          "openpose-json:DIR[?layout=body25|openpose18]")
-
-
-def boolean(text: str) -> bool:
-    """``true/false``, ``yes/no``, ``on/off`` or ``1/0`` (any case) -> bool; ValueError otherwise."""
-    value = text.strip().lower()
-    if value in ("true", "yes", "on", "1"):
-        return True
-    if value in ("false", "no", "off", "0"):
-        return False
-    raise ValueError(text)
 
 
 def _split_options(spec: str, rest: str, allowed: dict[str, type]) -> tuple[str, dict]:
@@ -45,7 +36,9 @@ def _split_options(spec: str, rest: str, allowed: dict[str, type]) -> tuple[str,
         try:
             options[key] = allowed[key](value)
         except ValueError:
-            raise ConfigError(f"--detector {spec!r}: option {key}={value!r} is not a {allowed[key].__name__}") from None
+            kinds = {int: "an integer", float: "a number", parse_bool: "a boolean (true/false)"}
+            kind = kinds.get(allowed[key], "valid")
+            raise ConfigError(f"--detector {spec!r}: option {key}={value!r} is not {kind}") from None
     return path, options
 
 
@@ -65,7 +58,7 @@ def make_detector(spec: str, source=None) -> Detector:
         from swarmpose.detect.onnx_pose import OnnxPoseDetector
 
         path, opts = _split_options(spec, spec[5:], {"adapter": str, "threads": int, "margin": float,
-                                                                  "refine": boolean})
+                                                                  "refine": parse_bool})
         return OnnxPoseDetector(path, **opts)
     if spec.startswith("openpose-json:"):
         from swarmpose.detect.openpose_json import OpenPoseJsonDetector

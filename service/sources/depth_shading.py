@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import ShapeError
 
 LIGHT = np.array([-0.35, -0.45, -1.0]) / np.linalg.norm([-0.35, -0.45, -1.0])
 """Direction towards the light in the camera frame (x right, y down, z forward): from the camera, up-left."""
@@ -41,7 +42,7 @@ def shaded_normals(depth: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
     """
     depth = np.asarray(depth, dtype=np.float64)
     if depth.ndim != 2:
-        raise ValueError(f"depth must be (H, W), got {depth.shape}")
+        raise ShapeError(f"depth must be (H, W), got {depth.shape}")
     p = point_map(depth, intrinsics)
     valid = np.isfinite(p[..., 2])
 

@@ -41,7 +41,7 @@ from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import SourceError
 from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
-from swarmpose.sources.depth_shading import shaded_normals
+from swarmpose.sources.depth_shading import point_map, shaded_normals
 from swarmpose.sources.groundtruth import GroundTruth
 
 WIDTH, HEIGHT = 320, 240
@@ -115,12 +115,14 @@ def read_depth(path: Path) -> np.ndarray:
 
 
 def read_skeleton(path: Path) -> np.ndarray:
-    """Kinect joints (F, 20, 3) metres in swarmpose's camera frame (x right, y down, z forward, un-mirrored)."""
+    """Kinect joints (F, 20, 3) metres in swarmpose's camera frame (x right, y down, z forward,
+    un-mirrored); NaN for joints the Kinect did not track (written as 0, 0, 0)."""
     raw = _load_variable(path, "d_skel", "skeleton")
     if raw.ndim != 3 or raw.shape[:2] != (len(KINECT_JOINTS), 3) or raw.shape[2] < 1:
         raise SourceError(f"utdmhad: d_skel in {path} is {raw.shape}, not {len(KINECT_JOINTS)} x 3 x frames")
-    skeleton = np.moveaxis(raw.astype(np.float64), 2, 0)
-    return skeleton * np.array([-1.0, -1.0, 1.0])
+    skeleton = np.moveaxis(raw.astype(np.float64), 2, 0) * np.array([-1.0, -1.0, 1.0])
+    skeleton[~(skeleton[..., 2] > 0)] = np.nan
+    return skeleton
 
 
 def ground_truth(skeleton: np.ndarray, intrinsics: Intrinsics = INTRINSICS) -> GroundTruth:
@@ -134,10 +136,6 @@ def ground_truth(skeleton: np.ndarray, intrinsics: Intrinsics = INTRINSICS) -> G
     return GroundTruth(frames, np.full((len(frames), 36), np.nan), joints3d, (None,) * len(frames), points2d)
 
 
-HEAD_TOP_MARGIN_M = 0.0
-"""Added to the measured extent (the depth sees the top of the head and the soles)."""
-
-
 def measured_height(depth: np.ndarray, intrinsics: Intrinsics = INTRINSICS) -> float:
     """A standing person's height (m) from one background-free depth image (H, W) m.
 
@@ -146,8 +144,6 @@ def measured_height(depth: np.ndarray, intrinsics: Intrinsics = INTRINSICS) -> f
     from the 0.5th to the 99.5th percentile, is the height. SourceError when fewer than
     500 pixels hold depth. Clamped to the body model's 1.2..2.3 m.
     """
-    from swarmpose.sources.depth_shading import point_map
-
     points = point_map(np.asarray(depth, dtype=np.float64), intrinsics).reshape(-1, 3)
     points = points[np.isfinite(points[:, 2])]
     if len(points) < 500:
@@ -156,7 +152,7 @@ def measured_height(depth: np.ndarray, intrinsics: Intrinsics = INTRINSICS) -> f
     axis = np.linalg.svd(centred, full_matrices=False)[2][0]
     along = centred @ axis
     lo, hi = np.percentile(along, [0.5, 99.5])
-    return float(np.clip(hi - lo + HEAD_TOP_MARGIN_M, 1.2, 2.3))
+    return float(np.clip(hi - lo, 1.2, 2.3))
 
 
 class UtdMhadSource(FrameSource):

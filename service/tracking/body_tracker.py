@@ -49,12 +49,6 @@ from swarmpose.tracking.result import BodyResult, lost_body
 HISTORY = 5
 """Previous solutions injected as particles."""
 
-START_MIN_BUDGET = 64
-"""The start's PSO per facing runs at least this many particles and generations, whatever the
-per-frame budget: it happens once per track, and a start that does not converge locks the
-track into a wrong facing (side view, MoveNet, p = g = 32: 151° off and 215 mm; with this
-floor: within 20° and 90 mm)."""
-
 
 class BodyTracker:
     """Tracks one person in a stream of frames with a body model (see the module docstring).
@@ -137,7 +131,7 @@ class BodyTracker:
         else:
             centre = self.previous
             recheck = self._recheck(frame.index, lifted, targets, depth, rng, timings)
-            torso = torso_pose(self.body, lifted, centre[7:])
+            torso = torso_pose(self.body, lifted, centre[7:], upright=False)
             offset = np.abs(torso[:3] - centre[:3]) if torso is not None else np.zeros(3)
             radius = search.angle_radius(self.body, self.intrinsics, centre, targets)
             start = search.spread(centre, pso.particles, rng, 0.04 + offset, 0.15, radius)
@@ -203,18 +197,21 @@ class BodyTracker:
         weights = replace(self.weights, joints=max(self.weights.joints, self.weights.depth * w_j / w_d))
         box = self._box(centre, targets)
         joint_objective = None
-        if weights.depth > 0:
+        if weights.depth > 0 and bool(np.any(depth > 0)):
             joint_objective = Objective(self.body, self.intrinsics, self.objective.scorer,
                                         replace(weights, depth=0.0, joints=1.0))
             joint_objective.set_frame(depth, box, targets, centre)
         start_objective = (self.objective if weights == self.weights
                            else Objective(self.body, self.intrinsics, self.objective.scorer, weights))
         start_objective.set_frame(depth, box, targets, centre)
+        # the start runs once per track, so it gets at least config.start_budget: at p = g = 32 a
+        # side view's start did not converge (151 deg off, 215 mm; BENCHMARKS.md, issue 12)
         first = generations is None
-        budget = max(self.config.generations, START_MIN_BUDGET) if first else generations
-        particles = max(self.config.particles, START_MIN_BUDGET) if first else self.config.particles
+        budget = max(self.config.generations, self.config.start_budget) if first else generations
+        particles = max(self.config.particles, self.config.start_budget) if first else self.config.particles
         # joints only (no depth): the joint stage is the whole fit, at twice the generations
-        pso = replace(self.config.pso_config, variant="perturbed", generations=budget * (1 if joint_objective else 2),
+        pso = replace(self.config.pso_config, variant="perturbed",
+                      generations=budget * (1 if joint_objective is not None else 2),
                       particles=particles)
         fits = []
         for degrees in FACINGS_DEG:

@@ -28,6 +28,8 @@ class TrackerConfig:
     tile: tuple[int, int] = setting((64, 64), "depth tile WxH pixels over the person's box", kind="size")
     triangles: int = setting(1500, "tracking level of detail of the body mesh, triangles", minimum=100)
     seed: int = setting(0, "PSO seed (a run repeats exactly with the same seed)", minimum=0)
+    start_budget: int = setting(64, "the start's PSOs per facing run at least this many particles and generations "
+                                    "(once per track)", minimum=1)
     recheck: int = setting(10, "every this many frames, refit the start's facings from the detection and let them "
                                "compete with the track (0 = off)", minimum=0)
     label_swaps: bool = setting(True, "a detected left/right pair may match the model's pair crossed, at a cost "

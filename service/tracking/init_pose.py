@@ -29,17 +29,19 @@ CAMERA_UP = np.array([0.0, -1.0, 0.0])
 """The camera frame's up (y points down): an upper body's torso is assumed upright along it."""
 
 
-def torso_pose(body: SkinnedBody, lifted: dict[str, np.ndarray], angles: np.ndarray) -> np.ndarray | None:
+def torso_pose(body: SkinnedBody, lifted: dict[str, np.ndarray], angles: np.ndarray,
+               upright: bool = True) -> np.ndarray | None:
     """A (36,) pose whose torso matches lifted joints {name: (3,) m}, or None when fewer than
     three of the four torso joints (hips, shoulders) have a finite lift and not both
     shoulders. angles: (29,) rad.
 
     With both shoulders but no hip (an upper body filling the frame: a desk, a close camera)
+    and ``upright`` (starts; not a running track, where a bending person is not upright)
     the torso is assumed upright: the hips sit the body's torso length below the shoulders'
     middle, along the camera's up made perpendicular to the shoulder line (the search then
     fits any lean)."""
     pts = {k: np.asarray(v, float) for k, v in lifted.items() if k in TORSO and np.all(np.isfinite(v))}
-    shoulders = "left_shoulder" in pts and "right_shoulder" in pts
+    shoulders = upright and "left_shoulder" in pts and "right_shoulder" in pts
     if len(pts) < 3 and not shoulders:
         return None
     lefts = [pts[f"left_{j}"] - pts[f"right_{j}"] for j in ("hip", "shoulder")

@@ -112,7 +112,6 @@ def _mat(path, **variables):
     return path
 
 
-@needs_assets
 def test_bad_utdmhad_input_is_refused_naming_the_file(tmp_path):
     depth_dir, skel_dir = tmp_path / "depth", tmp_path / "skeleton"
     depth_dir.mkdir()
@@ -148,3 +147,22 @@ def test_bad_utdmhad_input_is_refused_naming_the_file(tmp_path):
         open_source(str(renamed))
     with pytest.raises(SourceError, match="does not exist"):
         open_source(f"utdmhad:{tmp_path / 'a1_s1_t1_depth.mat'}")
+
+
+def test_untracked_kinect_joints_become_missing(tmp_path):
+    """The Kinect writes a joint it did not track as (0, 0, 0): it is NaN in the ground truth,
+    and the other joints keep their (converted) values."""
+    (tmp_path / "depth").mkdir()
+    (tmp_path / "skeleton").mkdir()
+    depth = np.zeros((240, 320, 2), np.uint16)
+    depth[100:140, 150:170] = 3000
+    skeleton = np.tile(np.array([0.1, 0.2, 3.0]), (20, 1))[:, :, None].repeat(2, axis=2)
+    skeleton[6, :, 1] = 0.0  # left_wrist untracked in frame 1
+    _mat(tmp_path / "depth" / "a1_s1_t1_depth.mat", d_depth=depth)
+    _mat(tmp_path / "skeleton" / "a1_s1_t1_skeleton.mat", d_skel=skeleton)
+    source = UtdMhadSource(tmp_path / "depth" / "a1_s1_t1_depth.mat")
+    np.testing.assert_allclose(source.skeleton[0, 6], [-0.1, -0.2, 3.0])
+    assert np.all(np.isnan(source.skeleton[1, 6])) and np.all(np.isfinite(source.skeleton[1, 5]))
+    truth = source.ground_truth.joints3d
+    wrist = 6  # EVAL_JOINTS: head, neck, shoulders, elbows, then left_wrist
+    assert np.all(np.isnan(truth[1, wrist])) and np.all(np.isfinite(truth[0]))
