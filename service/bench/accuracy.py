@@ -19,9 +19,7 @@ interrupted run resumes where it stopped. :func:`run_matrix` returns every recor
 
 from __future__ import annotations
 
-import json
 import logging
-import os
 import shutil
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass
@@ -32,6 +30,7 @@ import numpy as np
 
 from swarmpose.bench.detect import find_assets
 from swarmpose.bench.matrix import DETECTORS, MODES, MOTIONS, Cell, Sequence, cells
+from swarmpose.bench.store import read_record, tracker_settings, write_record
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.core.camera import Intrinsics
@@ -166,33 +165,21 @@ def run_matrix(out: Path, *, subset: str = "full", detectors: tuple[str, ...] | 
     if bad:
         raise ConfigError(f"unknown mode {bad[0]!r}; choose from {', '.join(MODES)}")
     root = find_assets(assets).resolve()
-    tracker = dict(tracker or {})
+    tracker = tracker_settings(tracker)
     out = Path(out)
     (out / "results").mkdir(parents=True, exist_ok=True)
     todo = [(cell, mode) for cell in cells(subset, detectors) for mode in modes]
     records = []
-    with progress_bar("bench accuracy", len(todo), enabled=progress) as bar:
+    with progress_bar("bench accuracy", len(todo), enabled=progress, unit="run") as bar:
         for cell, mode in todo:
             path = out / "results" / f"{cell.name}-{mode}.json"
-            record = _read_record(path, frames, tracker)
+            record = read_record(path, {"frames": frames, **tracker})
             if record is None:
                 folder = make_sequence(cell.sequence, out / "sequences" / cell.sequence.name, frames, root)
                 record = track_cell(cell, mode, folder, root, tracker, frames)
-                tmp = path.with_suffix(".tmp")
-                tmp.write_text(json.dumps(record))
-                os.replace(tmp, path)
+                write_record(path, record)
                 log.info("%s %s: %.1f mm", cell.name, mode, record["mpjpe_mm"] or float("nan"))
             records.append(record)
             bar.update(1)
     return records
 
-
-def _read_record(path: Path, frames: int, tracker: dict) -> dict | None:
-    """The record stored at ``path`` if it was made with the same frames and tracker settings."""
-    try:
-        record = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
-    if record.get("frames") != frames or any(record.get(k) != v for k, v in tracker.items()):
-        return None
-    return record

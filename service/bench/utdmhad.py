@@ -30,7 +30,6 @@ change to the tracker, use a fresh ``--out``.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import zipfile
@@ -43,6 +42,7 @@ import numpy as np
 from swarmpose.bench.accuracy import scores, track_with_truth
 from swarmpose.bench.detect import find_assets
 from swarmpose.bench.matrix import DETECTORS, MODES
+from swarmpose.bench.store import read_record, tracker_settings, write_record
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.progress import progress_bar
 from swarmpose.pipeline.config import ServiceConfig
@@ -69,9 +69,9 @@ def sequences(assets: Path, subjects: tuple[str, ...] = SUBJECTS, actions: tuple
     """The depth files of ``subjects`` (and ``actions``; empty: all), by action then subject;
     ConfigError when there are none."""
     folder = assets / FOLDER
-    found = sorted((p for p in folder.glob("*_depth.mat") if (m := _NAME.match(p.name)) and m.group(2) in subjects
-                    and (not actions or int(m.group(1)) in actions)),
-                   key=lambda p: (int(_NAME.match(p.name).group(1)), p.name))
+    named = [(int(m.group(1)), p.name, p) for p in folder.glob("*_depth.mat") if (m := _NAME.match(p.name))
+             and m.group(2) in subjects and (not actions or int(m.group(1)) in actions)]
+    found = [p for _, _, p in sorted(named)]
     if not found:
         raise ConfigError(f"no UTD-MHAD depth files of subjects {', '.join(subjects)}"
                           f"{' and actions ' + str(list(actions)) if actions else ''} in {folder}")
@@ -100,15 +100,15 @@ def track_sequence(path: Path, mode: str, detector: str, shape: str, assets: Pat
                    frames: int) -> tuple[dict, np.ndarray, np.ndarray]:
     """(record, estimates (F, J, 3), truth (F, J, 3)) of one sequence in one variant."""
     spec = DETECTORS[detector].format(assets=assets)
+    match = _NAME.match(path.name)
     shape_spec = ""
     height = None
     if shape == "measured":
-        height = subject_height(path.parent, _NAME.match(path.name).group(2))
+        height = subject_height(path.parent, match.group(2))
         shape_spec = f"height={height:.3f}"
     config = ServiceConfig(source=f"utdmhad:{path}", detector=spec, shape=shape_spec,
                            tracker=TrackerConfig(mode=mode, **tracker), overlay=False)
     run = track_with_truth(config, frames)
-    match = _NAME.match(path.name)
     record = {"sequence": path.name.removesuffix("_depth.mat"), "action": int(match.group(1)),
               "subject": match.group(2), "mode": mode, "detector": detector, "shape": shape, "height_m": height,
               "requested_frames": frames, **scores(run), **tracker}
@@ -130,7 +130,7 @@ def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[s
     if frames < 0:
         raise ConfigError(f"--frames must be 0 (all) or more, got {frames}")
     root = find_assets(assets).resolve()
-    tracker = {"particles": 64, "generations": 64, **(tracker or {})}  # stored, so a resume compares them
+    tracker = tracker_settings(tracker)
     results = Path(out) / "results"
     results.mkdir(parents=True, exist_ok=True)
     todo = [(path, m, d, s) for path in sequences(root, subjects, actions)
@@ -145,9 +145,7 @@ def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[s
                 tmp = results / f"{stem}.tmp.npz"
                 np.savez(tmp, estimates=estimates, truth=truth)
                 os.replace(tmp, results / f"{stem}.npz")
-                tmp = results / f"{stem}.tmp"
-                tmp.write_text(json.dumps(record))
-                os.replace(tmp, results / f"{stem}.json")
+                write_record(results / f"{stem}.json", record)
                 stored = record, estimates, truth
             records.append(stored[0])
             arrays.append(stored[1:])
@@ -159,11 +157,8 @@ def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[s
 def _read(stem: Path, frames: int, tracker: dict) -> tuple[dict, np.ndarray, np.ndarray] | None:
     """(record, estimates, truth) stored under ``stem`` (.json, .npz) for these frames and
     tracker settings; None when absent, made otherwise, or unreadable."""
-    try:
-        record = json.loads(stem.with_suffix(".json").read_text())
-    except (OSError, ValueError):
-        return None
-    if record.get("requested_frames") != frames or any(record.get(k) != v for k, v in tracker.items()):
+    record = read_record(stem.with_suffix(".json"), {"requested_frames": frames, **tracker})
+    if record is None:
         return None
     try:
         with np.load(stem.with_suffix(".npz")) as data:
@@ -177,16 +172,21 @@ def add_offset_scores(records: list[dict], arrays: list[tuple[np.ndarray, np.nda
     def variant(r: dict) -> tuple:
         return r["mode"], r["detector"], r["shape"]
 
+    offsets: dict[tuple, np.ndarray | None] = {}  # (variant, subject left out) -> (J, 3) m
     for record, (estimates, truth) in zip(records, arrays):
-        others = [a for r, a in zip(records, arrays)
-                  if variant(r) == variant(record) and r["subject"] != record["subject"]]
-        if not others:
-            record["mpjpe_offset_mm"] = None
-            continue
-        diff = np.concatenate([e - t for e, t in others])  # (frames, J, 3), NaN where a body was lost
-        seen = np.isfinite(diff)
-        offset = np.where(seen, diff, 0.0).sum(axis=0) / np.maximum(seen.sum(axis=0), 1)  # (J, 3); 0 if never seen
-        record["mpjpe_offset_mm"] = summarise(joint_errors(estimates - offset, truth))["mpjpe_mm"]
+        key = (variant(record), record["subject"])
+        if key not in offsets:
+            others = [e - t for r, (e, t) in zip(records, arrays)
+                      if variant(r) == key[0] and r["subject"] != key[1]]
+            if others:
+                diff = np.concatenate(others)  # (frames, J, 3), NaN where a body was lost
+                seen = np.isfinite(diff)
+                offsets[key] = np.where(seen, diff, 0.0).sum(axis=0) / np.maximum(seen.sum(axis=0), 1)  # 0: unseen
+            else:
+                offsets[key] = None
+        offset = offsets[key]
+        record["mpjpe_offset_mm"] = (None if offset is None
+                                     else summarise(joint_errors(estimates - offset, truth))["mpjpe_mm"])
 
 
 def format_table(records: list[dict]) -> str:

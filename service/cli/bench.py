@@ -103,6 +103,18 @@ def cmd_bench_overlays(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_assets(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--assets", default=None,
+                   help="shared assets folder (default: $SWARMPOSE_ASSETS or ../shared/assets)")
+
+
+def _add_budget_and_assets(p: argparse.ArgumentParser) -> None:
+    """--particles, --generations (the tracker's budget) and --assets of the tracking benchmarks."""
+    p.add_argument("--particles", type=positive_int, default=64, help="PSO particles")
+    p.add_argument("--generations", type=positive_int, default=64, help="PSO generations")
+    _add_assets(p)
+
+
 def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     """Register ``bench score``, ``detect``, ``accuracy``, ``utdmhad`` and ``overlays``."""
     bench = sub.add_parser("bench", help="benchmarks").add_subparsers(dest="bench", required=True, metavar="BENCH")
@@ -122,8 +134,7 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
                          help="ONNX 2D detectors: time per frame and error on a COCO photo")
     p.add_argument("--repeats", type=positive_int, default=20, help="timed runs per detector and image (medians)")
     p.add_argument("--threads", type=positive_int, default=None, help="onnxruntime threads (default: half the cores)")
-    p.add_argument("--assets", default=None,
-                   help="shared assets folder (default: $SWARMPOSE_ASSETS or ../shared/assets)")
+    _add_assets(p)
     p.add_argument("--json", action="store_true", help="one JSON object")
     p.set_defaults(func=cmd_bench_detect)
     p = bench.add_parser("accuracy", parents=[common], formatter_class=DEFAULTS,
@@ -136,10 +147,7 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
                    help=f"comma-separated subset of {', '.join(DETECTORS)} (default: the subset's)")
     p.add_argument("--modes", type=_names(MODES), default=MODES, help="comma-separated tracker modes")
     p.add_argument("--frames", type=positive_int, default=40, help="frames per sequence")
-    p.add_argument("--particles", type=positive_int, default=64, help="PSO particles")
-    p.add_argument("--generations", type=positive_int, default=64, help="PSO generations")
-    p.add_argument("--assets", default=None,
-                   help="shared assets folder (default: $SWARMPOSE_ASSETS or ../shared/assets)")
+    _add_budget_and_assets(p)
     p.add_argument("--json", action="store_true", help="one JSON object with every record")
     p.set_defaults(func=cmd_bench_accuracy)
     p = bench.add_parser("utdmhad", parents=[common], formatter_class=DEFAULTS,
@@ -155,10 +163,7 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
     p.add_argument("--actions", type=_names(tuple(str(a) for a in ACTIONS)), default=(),
                    help="comma-separated action numbers 1..27 (default: all)")
     p.add_argument("--frames", type=int, default=0, help="first frames of each sequence (0 = all)")
-    p.add_argument("--particles", type=positive_int, default=64, help="PSO particles")
-    p.add_argument("--generations", type=positive_int, default=64, help="PSO generations")
-    p.add_argument("--assets", default=None,
-                   help="shared assets folder (default: $SWARMPOSE_ASSETS or ../shared/assets)")
+    _add_budget_and_assets(p)
     p.add_argument("--json", action="store_true", help="one JSON object with the summary and every record")
     p.set_defaults(func=cmd_bench_utdmhad)
     p = bench.add_parser("overlays", parents=[common], formatter_class=DEFAULTS,
@@ -166,9 +171,6 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
     p.add_argument("--out", default="docs/qualitative", help="folder of the pictures")
     p.add_argument("--detector", choices=[d for d in DETECTORS if d != "simulated"], default="movenet",
                    help="2D network")
-    p.add_argument("--particles", type=positive_int, default=64, help="PSO particles")
-    p.add_argument("--generations", type=positive_int, default=64, help="PSO generations")
-    p.add_argument("--assets", default=None,
-                   help="shared assets folder (default: $SWARMPOSE_ASSETS or ../shared/assets)")
+    _add_budget_and_assets(p)
     p.add_argument("--json", action="store_true", help="one JSON object")
     p.set_defaults(func=cmd_bench_overlays)

@@ -68,6 +68,15 @@ class Intrinsics:
         """Camera-frame points (..., 3) m -> pixels (..., 2)."""
         return project(points, self.fx, self.fy, self.cx, self.cy)
 
+    def point_map(self, depth: np.ndarray) -> np.ndarray:
+        """Back-projected points (H, W, 3) m of a depth image (H, W) m taken with this camera;
+        NaN where the depth is 0 or not finite."""
+        h, w = depth.shape
+        z = np.where(np.isfinite(depth) & (depth > 0), depth, np.nan).astype(np.float64)
+        u = np.arange(w, dtype=np.float64)[None, :]
+        v = np.arange(h, dtype=np.float64)[:, None]
+        return np.stack([(u - self.cx) / self.fx * z, (v - self.cy) / self.fy * z, z], axis=-1)
+
 
 def look_at(eye: np.ndarray, target: np.ndarray, up=(0.0, 1.0, 0.0)) -> np.ndarray:
     """World -> camera rotation (3, 3) (rows = camera x, y, z in world coordinates) of a

@@ -22,6 +22,8 @@ from swarmpose.core.errors import ConfigError
 
 KINDS = ("str", "int", "float", "bool", "list", "size", "float?")
 _TRUE, _FALSE = {"1", "true", "yes", "on"}, {"0", "false", "no", "off", ""}
+_NONE = {"", "none", "null", "auto"}
+T = TypeVar("T")
 
 
 def parse_bool(text: str) -> bool:
@@ -30,8 +32,6 @@ def parse_bool(text: str) -> bool:
     if value in _TRUE | _FALSE:
         return value in _TRUE
     raise ValueError(text)
-_NONE = {"", "none", "null", "auto"}
-T = TypeVar("T")
 
 
 def setting(default: Any, help: str, *, kind: str | None = None, choices: tuple[str, ...] = (),

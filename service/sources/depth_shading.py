@@ -24,15 +24,6 @@ MAX_STEP_M = 0.05
 """Neighbours farther apart in depth than this are a silhouette edge, not one surface."""
 
 
-def point_map(depth: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
-    """Back-projected points (H, W, 3) m of a depth image (H, W) m; NaN where depth is 0 or not finite."""
-    h, w = depth.shape
-    z = np.where(np.isfinite(depth) & (depth > 0), depth, np.nan).astype(np.float64)
-    u = np.arange(w, dtype=np.float64)[None, :]
-    v = np.arange(h, dtype=np.float64)[:, None]
-    return np.stack([(u - intrinsics.cx) / intrinsics.fx * z, (v - intrinsics.cy) / intrinsics.fy * z, z], axis=-1)
-
-
 def shaded_normals(depth: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
     """(H, W, 3) uint8 grey image of ``depth`` (H, W) m lit by :data:`LIGHT`; black where depth is missing.
 
@@ -43,7 +34,7 @@ def shaded_normals(depth: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
     depth = np.asarray(depth, dtype=np.float64)
     if depth.ndim != 2:
         raise ShapeError(f"depth must be (H, W), got {depth.shape}")
-    p = point_map(depth, intrinsics)
+    p = intrinsics.point_map(depth)
     valid = np.isfinite(p[..., 2])
 
     def difference(axis: int) -> np.ndarray:

@@ -41,7 +41,7 @@ from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import SourceError
 from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
-from swarmpose.sources.depth_shading import point_map, shaded_normals
+from swarmpose.sources.depth_shading import shaded_normals
 from swarmpose.sources.groundtruth import GroundTruth
 
 WIDTH, HEIGHT = 320, 240
@@ -144,7 +144,7 @@ def measured_height(depth: np.ndarray, intrinsics: Intrinsics = INTRINSICS) -> f
     from the 0.5th to the 99.5th percentile, is the height. SourceError when fewer than
     500 pixels hold depth. Clamped to the body model's 1.2..2.3 m.
     """
-    points = point_map(np.asarray(depth, dtype=np.float64), intrinsics).reshape(-1, 3)
+    points = intrinsics.point_map(np.asarray(depth, dtype=np.float64)).reshape(-1, 3)
     points = points[np.isfinite(points[:, 2])]
     if len(points) < 500:
         raise SourceError(f"cannot measure a height: only {len(points)} pixels hold depth (need 500)")

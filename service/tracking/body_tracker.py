@@ -200,7 +200,7 @@ class BodyTracker:
         if weights.depth > 0 and bool(np.any(depth > 0)):
             joint_objective = Objective(self.body, self.intrinsics, self.objective.scorer,
                                         replace(weights, depth=0.0, joints=1.0))
-            joint_objective.set_frame(depth, box, targets, centre)
+            joint_objective.set_targets(targets)
         start_objective = (self.objective if weights == self.weights
                            else Objective(self.body, self.intrinsics, self.objective.scorer, weights))
         start_objective.set_frame(depth, box, targets, centre)

@@ -185,11 +185,15 @@ class Objective:
     def set_frame(self, depth: np.ndarray, box, targets: JointTargets, reference: np.ndarray) -> None:
         """Upload the observation of B, set the joint targets and N_P from the reference pose (36,)."""
         self.scorer.set_observation(depth, box)
-        self.targets = targets
+        self.set_targets(targets)
         _, counts = self.scorer.score(np.asarray(reference, float)[None])
         observed = int(counts["observed"][0])
         self.has_depth = observed > 0
         self.normaliser = float(max(int(counts["close"][0]), 0.1 * observed, 1.0))
+
+    def set_targets(self, targets: JointTargets) -> None:
+        """The frame's joint targets alone: all a joint-term-only objective (w_D = 0) needs."""
+        self.targets = targets
 
     @property
     def uses_depth(self) -> bool:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarmpose.core.camera import Intrinsics
-from swarmpose.sources.depth_shading import AMBIENT, LIGHT, point_map, shaded_normals
+from swarmpose.sources.depth_shading import AMBIENT, LIGHT, shaded_normals
 
 CAMERA = Intrinsics(64, 48, 60.0, 60.0, 31.5, 23.5)
 
@@ -46,6 +46,6 @@ def test_missing_depth_is_black_and_silhouettes_do_not_smear():
 def test_point_map_back_projects_pixels():
     depth = np.zeros((48, 64), np.float32)
     depth[23, 31] = 2.0
-    points = point_map(depth, CAMERA)
+    points = CAMERA.point_map(depth)
     np.testing.assert_allclose(points[23, 31], [2.0 * (31 - 31.5) / 60, 2.0 * (23 - 23.5) / 60, 2.0])
     assert np.isnan(points[0, 0]).all()
