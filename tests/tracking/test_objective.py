@@ -68,7 +68,7 @@ def test_lift_matches_rendered_truth_and_drops_background(body, scene):
 def test_depth_term_matches_open3d_and_numpy(body, scene):
     h, depth = scene
     scorer = ParticleScorer(body, INTR, (64, 64))
-    objective = Objective(body, INTR, scorer, ObjectiveWeights(depth=1.0, joints=0.0))
+    objective = Objective(body, INTR, scorer, ObjectiveWeights(depth=1.0, joints=0.0, penetration=0.0))  # E = E_D alone
     box = box_around(INTR.project(body.pose(h[None])[0]), margin=0.15)
     targets = JointTargets.from_detection(detection_of(body, h), depth, INTR, body)
     objective.set_frame(depth, box, targets, h)
