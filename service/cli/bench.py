@@ -12,12 +12,15 @@ from swarmpose.bench.detect import bench_detectors, format_detect_bench
 from swarmpose.bench.matrix import DETECTORS, MODES, SUBSETS
 from swarmpose.bench.qualitative import write_overlays
 from swarmpose.bench.score import bench_score, format_bench
+from swarmpose.bench.track import bench_track, format_track_bench
 from swarmpose.bench.utdmhad import ACTIONS, SHAPES, SUBJECTS, run_utdmhad
 from swarmpose.bench.utdmhad import format_table as format_utdmhad_table
 from swarmpose.bench.utdmhad import summary as utdmhad_summary
 from swarmpose.cli.common import DEFAULTS, add_body_options, positive_int, quiet
+from swarmpose.cli.settings import add_flags, from_args
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import parse_size
+from swarmpose.tracking.config import TrackerConfig
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -32,6 +35,14 @@ def cmd_bench_score(args: argparse.Namespace) -> int:
     result = bench_score(particles=args.particles, resolution=args.tile, body=args.body, shape=args.shape,
                          repeats=args.repeats, device=args.device, lod=args.triangles)
     print(json.dumps(result) if args.json else format_bench(result))
+    return 0
+
+
+def cmd_bench_track(args: argparse.Namespace) -> int:
+    """End-to-end frames per second of the tracker on a fixed synthetic sequence, with the split."""
+    result = bench_track(body=args.body, shape=args.shape, motion=args.motion, frames=args.frames,
+                         repeats=args.repeats, tracker=from_args(TrackerConfig, args), progress=not quiet(args))
+    print(json.dumps(result) if args.json else format_track_bench(result))
     return 0
 
 
@@ -116,7 +127,7 @@ def _add_budget_and_assets(p: argparse.ArgumentParser) -> None:
 
 
 def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
-    """Register ``bench score``, ``detect``, ``accuracy``, ``utdmhad`` and ``overlays``."""
+    """Register ``bench score``, ``track``, ``detect``, ``accuracy``, ``utdmhad`` and ``overlays``."""
     bench = sub.add_parser("bench", help="benchmarks").add_subparsers(dest="bench", required=True, metavar="BENCH")
     p = bench.add_parser("score", parents=[common], formatter_class=DEFAULTS,
                          help="OpenCL scorer vs the Open3D ray-casting baseline, hypotheses per second")
@@ -130,6 +141,15 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
                                                 "else PoCL)")
     p.add_argument("--json", action="store_true", help="one JSON object")
     p.set_defaults(func=cmd_bench_score)
+    p = bench.add_parser("track", parents=[common], formatter_class=DEFAULTS,
+                         help="the tracker's frames per second on a fixed synthetic sequence, where the time goes")
+    add_body_options(p)
+    p.add_argument("--motion", default="builtin:walk", help="builtin:NAME or a BVH file, filmed from the front")
+    p.add_argument("--frames", type=positive_int, default=30, help="frames of the sequence")
+    p.add_argument("--repeats", type=positive_int, default=3, help="runs over the sequence (medians)")
+    add_flags(p, TrackerConfig)
+    p.add_argument("--json", action="store_true", help="one JSON object")
+    p.set_defaults(func=cmd_bench_track)
     p = bench.add_parser("detect", parents=[common], formatter_class=DEFAULTS,
                          help="ONNX 2D detectors: time per frame and error on a COCO photo")
     p.add_argument("--repeats", type=positive_int, default=20, help="timed runs per detector and image (medians)")

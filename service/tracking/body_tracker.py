@@ -50,6 +50,14 @@ HISTORY = 5
 """Previous solutions injected as particles."""
 
 
+def search_split(spent_s: dict[str, float], pso_ms: float) -> dict[str, float]:
+    """Where a frame's search (``pso_ms``, ms) went, from :attr:`Objective.spent_s` (s):
+    ``fk``, ``score`` (depth term), ``joint_term`` and ``pso_update`` (the swarm's own
+    arithmetic and everything else), all ms."""
+    parts = {"fk": 1000 * spent_s["fk"], "score": 1000 * spent_s["score"], "joint_term": 1000 * spent_s["joints"]}
+    return {**parts, "pso_update": max(pso_ms - sum(parts.values()), 0.0)}
+
+
 class BodyTracker:
     """Tracks one person in a stream of frames with a body model (see the module docstring).
 
@@ -141,8 +149,10 @@ class BodyTracker:
 
         t1 = time.perf_counter()
         self.objective.set_frame(depth, self._box(centre, targets), targets, centre)
+        self.objective.take_spent()
         result = minimise(self.objective, start, self.lo, self.hi, rng, pso, search.renormalise, search.perturb)
         timings["pso"] = 1000 * (time.perf_counter() - t1)
+        timings.update(search_split(self.objective.take_spent(), timings["pso"]))
         best = result.best
         self.objective(best[None])
         parts = {k: float(v[0]) for k, v in self.objective.last_parts.items()}

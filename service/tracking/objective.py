@@ -32,6 +32,7 @@ sweep in BENCHMARKS.md):
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -51,6 +52,9 @@ SWAP_COST = 0.05
 IMAGE_MARGIN = 0.5
 """Keypoints up to this share of the image's width/height outside it still count (a foot cut
 off by the frame's edge); farther ones are ignored."""
+
+SPENT_KEYS = ("fk", "score", "joints", "calls")
+"""The parts of :attr:`Objective.spent_s`."""
 
 ARM_POINTS = ("left_elbow", "right_elbow", "left_wrist", "right_wrist")
 """The points :attr:`Objective.penetration_cm` keeps out of the torso."""
@@ -166,7 +170,9 @@ class Objective:
     """E(h, o) for batches of poses on one frame.
 
     Per frame call :meth:`set_frame`; then ``objective(h)`` returns E (P,) and
-    :attr:`last_parts` holds E_D, E_J2D, E_J3D, E_J (P,) of the last call.
+    :attr:`last_parts` holds E_D, E_J2D, E_J3D, E_J (P,) of the last call. :attr:`spent_s`
+    accumulates where the calls' time went (s): ``fk`` (bone transforms), ``score`` (the
+    depth term's launch and wait), ``joints`` (joint and penetration terms), and ``calls``.
     ``scorer``: a :class:`~swarmpose.gpu.scorer.ParticleScorer` for the same body and intrinsics.
     """
 
@@ -181,6 +187,12 @@ class Objective:
         self.normaliser = 1.0
         self.has_depth = False
         self.last_parts: dict[str, np.ndarray] = {}
+        self.spent_s = dict.fromkeys(SPENT_KEYS, 0.0)
+
+    def take_spent(self) -> dict[str, float]:
+        """The time accumulated in :attr:`spent_s` since the last take, and a fresh start."""
+        spent, self.spent_s = self.spent_s, dict.fromkeys(SPENT_KEYS, 0.0)
+        return spent
 
     def set_frame(self, depth: np.ndarray, box, targets: JointTargets, reference: np.ndarray) -> None:
         """Upload the observation of B, set the joint targets and N_P from the reference pose (36,)."""
@@ -251,14 +263,17 @@ class Objective:
         return order
 
     def __call__(self, h: np.ndarray) -> np.ndarray:
+        t0 = time.perf_counter()
         h = np.asarray(h, dtype=np.float64)
         transforms = skinning_transforms(self.body.rig, h)
         w = self.weights
         zeros = np.zeros(len(h))
         e_d, e_2d, e_3d = zeros, zeros, zeros
+        t1 = time.perf_counter()
         if self.uses_depth:
             sums, _ = self.scorer.score_transforms(transforms.astype(np.float32))
             e_d = 100.0 * sums / self.normaliser
+        t2 = time.perf_counter()
         if self.uses_joints:
             pts = self.model_points(transforms)
             z = np.maximum(pts[..., 2:3], 1e-3)  # a point behind the camera must not flip sides
@@ -272,4 +287,9 @@ class Objective:
         e_p = self.penetration_cm(transforms) if w.penetration > 0 else zeros
         total = w.depth * e_d + w.joints * e_j + w.penetration * e_p
         self.last_parts = {"E": total, "E_D": e_d, "E_J": e_j, "E_J2D": e_2d, "E_J3D": e_3d, "E_P": e_p}
+        spent = self.spent_s
+        spent["fk"] += t1 - t0
+        spent["score"] += t2 - t1
+        spent["joints"] += time.perf_counter() - t2
+        spent["calls"] += 1
         return total
