@@ -85,7 +85,7 @@ def bench_track(body: str = "builtin", shape: str | None = None, motion: str = "
         config = ServiceConfig(source=str(folder), detector="simulated", body=body, shape=shape or "",
                                tracker=tracker, overlay=False)
         runs = []
-        with progress_bar("bench track", repeats, enabled=progress) as bar:
+        with progress_bar("bench track", repeats, enabled=progress, unit="run") as bar:
             for _ in range(repeats):
                 runs.append(_track_once(config, frames))
                 bar.update(1)
