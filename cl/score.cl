@@ -4,9 +4,15 @@
  * work-items per group (1 on CPUs: the z-buffer is then plain, not atomic), ZATOMIC (use
  * atomic_max on the local z-buffer; required when WG > 1), CULL (skip back faces: exact for
  * closed meshes seen from outside), ZNEAR (m; triangles with a vertex nearer are skipped),
- * WRITE_TILES (also write each particle's rendered depth tile, for tests).
+ * WRITE_TILES (also write each particle's rendered depth tile and, with FK, its bone
+ * transforms, for tests), FK (the inputs are
+ * poses, P x POSE_DIM, and the kernel computes the bone transforms itself, include/fk.h, with NJ
+ * tracking joints; it also writes the NPT named points of every particle; without FK the
+ * inputs are bone transforms, P x NB x 3 x 4, and the FK tables and points are unused).
  *
- * For particle p: skin the rest mesh with its NB bone transforms (LBS, 4 influences), project
+ * For particle p: (FK) its bone transforms and named points from its pose; unless render is 0
+ * (a joint-term-only objective: counts and sums are then 0), skin the rest mesh with the NB
+ * bone transforms (LBS, 4 influences), project
  * into the tile, rasterise a z-buffer (of 1/z, 1/m; 0 = background) and reduce over
  * the tile pixels with an observation d_o > 0:
  *   sums[p]      = sum of min(|d_h - d_o|, T), where a pixel the model does not cover has
@@ -16,6 +22,9 @@
  */
 #include "include/skin.h"
 #include "include/raster.h"
+#if FK
+#include "include/fk.h"
+#endif
 
 #define NPIX (TW * TH)
 #define BACKGROUND 0 /* bits of 1/z = 0: nothing rendered */
@@ -45,7 +54,12 @@ inline int hsum8(const int8 v)
 }
 
 __kernel __attribute__((reqd_work_group_size(WG, 1, 1)))
-void score_particles(__global const float *bones,     /* P x NB x 12, camera frame */
+void score_particles(__global const float *hyp,       /* FK: P x POSE_DIM poses; else P x NB x 12, camera frame */
+                     __global const float4 *steps,    /* FK tables (include/fk.h) */
+                     __global const int2 *links,
+                     __global const float4 *bone_data,
+                     __global const int *point_bone,  /* NPT named points: bone, */
+                     __global const float4 *point_rest, /* rest position (x, y, z, 0) body frame, m */
                      __global const float4 *rest,     /* NV (x, y, z, 0) body frame, m */
                      __global const int4 *skin_idx,   /* NV bone indices */
                      __global const float4 *skin_w,   /* NV weights, sum 1 */
@@ -53,9 +67,12 @@ void score_particles(__global const float *bones,     /* P x NB x 12, camera fra
                      __global const float *obs,       /* TH x TW observed depth, m, 0 = none */
                      const float4 proj,               /* (ax, bx, ay, by) camera -> tile */
                      const float threshold,           /* T, m */
+                     const int render,                /* 0: FK and points only */
                      __global float *sums,            /* P */
                      __global int4 *counts,           /* P */
-                     __global float *tiles)           /* P x TH x TW if WRITE_TILES, else unused */
+                     __global float4 *points,         /* P x NPT camera frame, m (FK only) */
+                     __global float *tiles,           /* P x TH x TW if WRITE_TILES, else unused */
+                     __global float4 *bones_out)      /* P x NB x 3 rows [R | t] if WRITE_TILES and FK */
 {
     __local float4 lbones[NB * 3];
     __local float4 lverts[NV];
@@ -64,8 +81,29 @@ void score_particles(__global const float *bones,     /* P x NB x 12, camera fra
     const int p = get_group_id(0);
     const int lid = get_local_id(0);
 
+#if FK
+    __local float4 ljoint_q[NJ];
+    __local float4 lframe_q[NB];
+    if (lid == 0)
+        forward_kinematics(hyp + p * POSE_DIM, steps, links, bone_data, ljoint_q, lframe_q, lbones);
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int i = lid; i < NPT; i += WG)
+        points[p * NPT + i] = (float4)(affine_apply(lbones + 3 * point_bone[i], point_rest[i].xyz), 0.0f);
+#if WRITE_TILES
     for (int i = lid; i < NB * 3; i += WG)
-        lbones[i] = ((__global const float4 *)bones)[p * NB * 3 + i];
+        bones_out[p * NB * 3 + i] = lbones[i];
+#endif
+    if (!render) {
+        if (lid == 0) {
+            sums[p] = 0.0f;
+            counts[p] = (int4)(0);
+        }
+        return;
+    }
+#else
+    for (int i = lid; i < NB * 3; i += WG)
+        lbones[i] = ((__global const float4 *)hyp)[p * NB * 3 + i];
+#endif
     for (int i = lid; i < NPIX; i += WG)
         zbuf[i] = BACKGROUND;
     barrier(CLK_LOCAL_MEM_FENCE);

@@ -2,8 +2,11 @@
 
 Both sides score the same P hypotheses against the same observation in the same run:
 
-* OpenCL: one vectorised host FK call (:func:`swarmpose.body.kinematics.skinning_transforms`), one
-  upload, one launch, one read-back per generation (:class:`swarmpose.gpu.scorer.ParticleScorer`);
+* OpenCL: one upload of the poses, one launch (forward kinematics, named points, skinning,
+  rasterising and scoring on the device), one read-back per generation
+  (:meth:`swarmpose.gpu.scorer.ParticleScorer.evaluate`: everything the tracker's objective
+  launches); with ``host_fk=True`` the older path: the numpy FK on the host, its transforms
+  uploaded (:meth:`~swarmpose.gpu.scorer.ParticleScorer.score_transforms`);
 * baseline: the same FK call, then per hypothesis numpy LBS, an Open3D ``RaycastingScene``
   built from the posed mesh, the rays of the tile pixels of B cast, and the float64 numpy
   score (:mod:`swarmpose.gpu.reference`).
@@ -52,7 +55,7 @@ def _median(rows: list[dict], key: str) -> float:
 
 def bench_score(particles: int = 64, resolution: tuple[int, int] = (64, 64), body: str = "builtin",
                 shape: str | None = None, repeats: int = 20, device=None, lod: int = 1500,
-                baseline_repeats: int | None = None, warmup: int = 3, seed: int = 0) -> dict:
+                baseline_repeats: int | None = None, warmup: int = 3, seed: int = 0, host_fk: bool = False) -> dict:
     """Hypotheses per second of the OpenCL scorer and of the CPU baseline, and where time goes.
 
     particles: P hypotheses per generation; resolution: tile (TW, TH) pixels over the box B;
@@ -60,7 +63,8 @@ def bench_score(particles: int = 64, resolution: tuple[int, int] = (64, 64), bod
     OpenCL device spec (None or "": the default device). Returns a dict with
     ``hypotheses_per_s``, ``baseline_hypotheses_per_s``, ``ratio``, ``particles``,
     ``resolution``, ``triangles``, ``vertices``, ``device``, ``split_ms`` (per generation:
-    host_fk, upload, kernel, readback, sync = wall time not covered by those, total),
+    host_fk (0 unless ``host_fk``), upload, kernel, readback, sync = wall time not covered by
+    those, total),
     ``kernel_hypotheses_per_s`` (kernel time only), ``baseline_split_ms`` and
     ``max_sum_difference`` (largest relative difference of the two sides' sums).
     """
@@ -75,9 +79,13 @@ def bench_score(particles: int = 64, resolution: tuple[int, int] = (64, 64), bod
     rows = []
     for i in range(warmup + repeats):
         t0 = time.perf_counter()
-        transforms = scorer.transforms(h)
-        t1 = time.perf_counter()
-        sums, _ = scorer.score_transforms(transforms)
+        if host_fk:
+            transforms = scorer.transforms(h)
+            t1 = time.perf_counter()
+            sums, _ = scorer.score_transforms(transforms)
+        else:
+            t1 = t0
+            sums, _, _ = scorer.evaluate(h)
         t2 = time.perf_counter()
         if i >= warmup:
             tm = scorer.last_timings
@@ -119,6 +127,7 @@ def bench_score(particles: int = 64, resolution: tuple[int, int] = (64, 64), bod
         "vertices": int(len(model.vertices)),
         "bones": int(len(model.bone_names)),
         "body": model.name,
+        "fk": "host" if host_fk else "device",
         "device": describe(scorer.device),
         "local_size": scorer.local_size,
         "repeats": int(repeats),
@@ -135,7 +144,7 @@ def format_bench(result: dict) -> str:
     b = result["baseline_split_ms"]
     tw, th = result["resolution"]
     return "\n".join([
-        f"scorer: {result['particles']} particles, {tw}x{th} tile, {result['body']} "
+        f"scorer: {result['particles']} particles, {tw}x{th} tile, FK on the {result['fk']}, {result['body']} "
         f"({result['triangles']} triangles, {result['vertices']} vertices), {result['device']}",
         f"OpenCL   {result['hypotheses_per_s']:10.0f} hypotheses/s   "
         f"(kernel only {result['kernel_hypotheses_per_s']:.0f}/s)",

@@ -33,7 +33,7 @@ def _size(text: str) -> tuple[int, int]:
 def cmd_bench_score(args: argparse.Namespace) -> int:
     """Hypotheses per second of the OpenCL scorer against the Open3D ray-casting baseline."""
     result = bench_score(particles=args.particles, resolution=args.tile, body=args.body, shape=args.shape,
-                         repeats=args.repeats, device=args.device, lod=args.triangles)
+                         repeats=args.repeats, device=args.device, lod=args.triangles, host_fk=args.host_fk)
     print(json.dumps(result) if args.json else format_bench(result))
     return 0
 
@@ -139,6 +139,8 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
     p.add_argument("--repeats", type=positive_int, default=20, help="timed generations (medians)")
     p.add_argument("--device", default="", help="OpenCL device: cpu, gpu, P:D or part of its name (empty: a GPU, "
                                                 "else PoCL)")
+    p.add_argument("--host-fk", action="store_true",
+                   help="forward kinematics in numpy on the host, as before it moved onto the device (for comparison)")
     p.add_argument("--json", action="store_true", help="one JSON object")
     p.set_defaults(func=cmd_bench_score)
     p = bench.add_parser("track", parents=[common], formatter_class=DEFAULTS,

@@ -2,10 +2,13 @@
 
 Per frame, :meth:`ParticleScorer.set_observation` resamples the observed depth inside the
 person's box B to a TW x TH tile (see :mod:`swarmpose.gpu.tile`) and uploads it. Per
-generation, :meth:`ParticleScorer.score` computes the bone transforms of all P particles
-with one vectorised numpy call, uploads them (P x B x 3 x 4 float32), launches
-``cl/score.cl`` once (one work-group per particle: skin, project, rasterise a local
-z-buffer, reduce) and reads back per-particle sums (P,) and counts (P, 4) only.
+generation, :meth:`ParticleScorer.evaluate` uploads the P poses (P x 36 float32), launches
+``cl/score.cl`` once (one work-group per particle: forward kinematics, the named points,
+skin, project, rasterise a local z-buffer, reduce) and reads back per-particle sums (P,),
+counts (P, 4) and the named points (P, NPT, 3), which the joint term uses; with
+``render=False`` only the FK and the points (a joint-term-only objective).
+:meth:`ParticleScorer.score_transforms` scores bone transforms computed elsewhere (the
+numpy FK, :meth:`ParticleScorer.transforms`, the oracle of the device's).
 
 The per-pixel term is ``min(|d_h - d_o|, T)`` over tile pixels with ``d_o > 0``; where the
 model does not cover a pixel ``d_h = 0`` (the renderer's "no depth"), so the term is
@@ -28,10 +31,12 @@ import time
 import numpy as np
 
 from swarmpose.body.kinematics import as_poses, skinning_transforms
+from swarmpose.body.skeleton import POSE_DIM
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError, ShapeError
 from swarmpose.gpu.context import ClContext, describe
+from swarmpose.gpu.fk_tables import fk_tables
 from swarmpose.gpu.reference import COUNT_NAMES
 from swarmpose.gpu.tile import TileBox, clip_box
 
@@ -49,7 +54,7 @@ class ParticleScorer:
     particle (None: 1 on CPUs, 64 on other devices); atomic: use atomic_max on the local
     z-buffer (None: only when local_size > 1); znear: near plane in m.
 
-    ``last_timings`` holds the split of the last call in seconds: host_s (FK), upload_s,
+    ``last_timings`` holds the split of the last call in seconds: upload_s,
     kernel_s and readback_s (OpenCL event times) and wall_s (enqueue to results). One
     scorer serves one thread at a time.
     """
@@ -80,24 +85,26 @@ class ParticleScorer:
         if wg > 1 and not self.atomic:
             raise ConfigError("local_size > 1 needs atomic=True (work-items share the z-buffer)")
         nv, nf, nb = len(body.vertices), len(body.triangles), len(body.bone_names)
-        need = nb * 48 + nv * 24 + self.tw * self.th * 4 + (wg * 20 if wg > 1 else nf * 4)
+        need = nb * 48 + (nb + 16) * 16 + nv * 24 + self.tw * self.th * 4 + (wg * 20 if wg > 1 else nf * 4)
         if need > self.device.local_mem_size:
             raise ConfigError(f"{body.name} ({nv} vertices) with a {self.tw}x{self.th} tile needs {need} bytes of "
                               f"local memory, {describe(self.device)} has {self.device.local_mem_size}; "
                               "use a smaller tracking LOD (body.tracking_lod) or tile")
+        tables = fk_tables(body)
+        self.point_count = len(tables.point_bone)
         self.defines = {"NV": nv, "NF": nf, "NB": nb, "TW": self.tw, "TH": self.th, "WG": wg,
-                        "ZATOMIC": self.atomic, "CULL": bool(cull_backfaces), "ZNEAR": float(znear)}
-        self._mesh = self._upload_mesh(body)
+                        "ZATOMIC": self.atomic, "CULL": bool(cull_backfaces), "ZNEAR": float(znear), **tables.defines}
+        self._mesh = self._upload_mesh(body, tables)
         self._capacity = 0
         self._tile_box: TileBox | None = None
         self._observed: np.ndarray | None = None
         self._obs_buf = None
-        self._tiles_buf = None
-        self._kernels: dict[bool, object] = {}
+        self._tiles_buf = self._bones_out_buf = None
+        self._kernels: dict[tuple[bool, bool], object] = {}
         self.last_timings: dict[str, float] = {}
 
     # ------------------------------------------------------------------ setup
-    def _upload_mesh(self, body: SkinnedBody) -> dict:
+    def _upload_mesh(self, body: SkinnedBody, tables) -> dict:
         cl = self._cl
         mf = cl.mem_flags
         nv = len(body.vertices)
@@ -106,27 +113,34 @@ class ParticleScorer:
         tris = np.zeros((len(body.triangles), 4), np.int32)
         tris[:, :3] = body.triangles
         arrays = {"rest": rest, "idx": np.ascontiguousarray(body.skin_indices, np.int32),
-                  "w": np.ascontiguousarray(body.skin_weights, np.float32), "tris": tris}
+                  "w": np.ascontiguousarray(body.skin_weights, np.float32), "tris": tris,
+                  "steps": tables.steps, "links": tables.links, "bone_data": tables.bone_data,
+                  "point_bone": tables.point_bone, "point_rest": tables.point_rest,
+                  "no_observation": np.zeros(1, np.float32)}
         return {k: cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a) for k, a in arrays.items()}
 
-    def _kernel(self, write_tiles: bool):
-        if write_tiles not in self._kernels:
-            prg = self.cl_context.program("score.cl", {**self.defines, "WRITE_TILES": write_tiles})
-            self._kernels[write_tiles] = self._cl.Kernel(prg, "score_particles")  # one per scorer
-        return self._kernels[write_tiles]
+    def _kernel(self, write_tiles: bool, fk: bool):
+        key = (write_tiles, fk)
+        if key not in self._kernels:
+            prg = self.cl_context.program("score.cl", {**self.defines, "WRITE_TILES": write_tiles, "FK": fk})
+            self._kernels[key] = self._cl.Kernel(prg, "score_particles")  # one per scorer
+        return self._kernels[key]
 
     def _ensure_capacity(self, p: int, tiles: bool) -> None:
         cl = self._cl
         if p > self._capacity:
             cap = max(p, 2 * self._capacity, 16)
             nb = self.defines["NB"]
-            self._bones_buf = cl.Buffer(self.context, cl.mem_flags.READ_ONLY, cap * nb * 48)
+            self._input_buf = cl.Buffer(self.context, cl.mem_flags.READ_ONLY, cap * max(nb * 48, POSE_DIM * 4))
+            self._points_buf = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, cap * self.point_count * 16)
             self._sums_buf = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, cap * 4)
             self._counts_buf = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, cap * 16)
-            self._tiles_buf = None
+            self._tiles_buf = self._bones_out_buf = None
             self._capacity = cap
         if tiles and self._tiles_buf is None:
-            self._tiles_buf = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, self._capacity * self.tw * self.th * 4)
+            cap = self._capacity
+            self._tiles_buf = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, cap * self.tw * self.th * 4)
+            self._bones_out_buf = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, cap * self.defines["NB"] * 48)
 
     # ------------------------------------------------------------------ per frame
     def set_observation(self, depth: np.ndarray, box) -> None:
@@ -168,65 +182,94 @@ class ParticleScorer:
             return np.zeros((0, self.defines["NB"], 3, 4), np.float32)
         return skinning_transforms(self.body.rig, h).astype(np.float32)
 
+    def evaluate(self, h: np.ndarray, render: bool = True) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
+        """Depth-term sums (P,) float64 (m, summed over observed tile pixels), counts {name:
+        (P,) int64} (:data:`COUNT_NAMES`) and the body's named points (P, NPT, 3) float64 m
+        (camera frame, in ``body.point_names`` order) of poses h (P, 36), forward kinematics on
+        the device. render=False: the points only (sums and counts 0; no observation needed)."""
+        poses = np.ascontiguousarray(as_poses(h), np.float32)
+        sums, counts, points, _ = self._launch(poses, fk=True, write_tiles=False, render=render)
+        return sums, counts, points
+
     def score(self, h: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Depth-term sums (P,) float64 (m, summed over observed tile pixels) and counts
-        {name: (P,) int64} (:data:`COUNT_NAMES`) for poses h (P, 36)."""
-        t0 = time.perf_counter()
-        transforms = self.transforms(h)
-        host = time.perf_counter() - t0
-        sums, counts, _ = self._launch(transforms, write_tiles=False)
-        self.last_timings["host_s"] = host
+        """Sums and counts of :meth:`evaluate`."""
+        sums, counts, _ = self.evaluate(h)
         return sums, counts
 
     def score_transforms(self, transforms: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """As :meth:`score`, from precomputed bone transforms (P, B, 3, 4) (camera frame)."""
         transforms = np.asarray(transforms, np.float32)
+        nb = self.defines["NB"]
+        if transforms.ndim != 4 or transforms.shape[1:] != (nb, 3, 4):
+            raise ShapeError(f"transforms have shape {transforms.shape}, expected (P, {nb}, 3, 4)")
         if not np.all(np.isfinite(transforms)):
             raise ShapeError("bone transforms contain non-finite values")
-        sums, counts, _ = self._launch(transforms, write_tiles=False)
+        sums, counts, _, _ = self._launch(transforms, fk=False, write_tiles=False, render=True)
         return sums, counts
 
     def render_and_score(self, h: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         """Debug path: rendered depth tiles (P, TH, TW) float32 m (0 = background), sums, counts."""
-        sums, counts, tiles = self._launch(self.transforms(h), write_tiles=True)
+        poses = np.ascontiguousarray(as_poses(h), np.float32)
+        sums, counts, _, tiles = self._launch(poses, fk=True, write_tiles=True, render=True)
         return tiles, sums, counts
+
+    def device_transforms(self, h: np.ndarray) -> np.ndarray:
+        """Bone transforms (P, B, 3, 4) float32 as the device's forward kinematics computes them
+        for poses h (P, 36) (debug path; :meth:`transforms` is the numpy oracle)."""
+        poses = np.ascontiguousarray(as_poses(h), np.float32)
+        self._launch(poses, fk=True, write_tiles=True, render=False)
+        bones = np.empty((len(poses), self.defines["NB"], 3, 4), np.float32)
+        if len(poses):
+            self._cl.enqueue_copy(self.queue, bones, self._bones_out_buf, is_blocking=True)
+        return bones
 
     def render(self, h: np.ndarray) -> np.ndarray:
         """Rendered depth tiles (P, TH, TW) float32 m, 0 = background (debug path)."""
         return self.render_and_score(h)[0]
 
-    def _launch(self, transforms: np.ndarray, write_tiles: bool):
+    def _launch(self, data: np.ndarray, fk: bool, write_tiles: bool, render: bool):
+        """One launch for P particles: data is poses (P, 36) (fk) or transforms (P, NB, 3, 4),
+        float32. Returns sums, counts, points (P, NPT, 3) or None, tiles or None."""
         cl = self._cl
-        if self._obs_buf is None:
+        if render and self._obs_buf is None:
             raise ConfigError("call set_observation(depth, box) before scoring")
-        p, nb = len(transforms), self.defines["NB"]
-        if transforms.ndim != 4 or transforms.shape[1:] != (nb, 3, 4):
-            raise ShapeError(f"transforms have shape {transforms.shape}, expected (P, {nb}, 3, 4)")
+        p = len(data)
+        npt = self.point_count
         if p == 0:
-            self.last_timings = {"host_s": 0.0, "upload_s": 0.0, "kernel_s": 0.0, "readback_s": 0.0, "wall_s": 0.0}
+            self.last_timings = {"upload_s": 0.0, "kernel_s": 0.0, "readback_s": 0.0, "wall_s": 0.0}
             empty = np.zeros((0, self.th, self.tw), np.float32) if write_tiles else None
-            return np.zeros(0), {k: np.zeros(0, np.int64) for k in COUNT_NAMES}, empty
+            return (np.zeros(0), {k: np.zeros(0, np.int64) for k in COUNT_NAMES},
+                    np.zeros((0, npt, 3)) if fk else None, empty)
         t1 = time.perf_counter()
         self._ensure_capacity(p, write_tiles)
-        bones = np.ascontiguousarray(transforms, dtype=np.float32)
         q = self.queue
-        up = cl.enqueue_copy(q, self._bones_buf, bones, is_blocking=False)
+        up = cl.enqueue_copy(q, self._input_buf, data, is_blocking=False)
         cl.enqueue_fill_buffer(q, self._sums_buf, np.float32(np.nan), 0, p * 4)
         cl.enqueue_fill_buffer(q, self._counts_buf, np.int32(-1), 0, p * 16)
+        if fk:
+            cl.enqueue_fill_buffer(q, self._points_buf, np.float32(np.nan), 0, p * npt * 16)
         npix = self.tw * self.th
         if write_tiles:
             cl.enqueue_fill_buffer(q, self._tiles_buf, np.float32(np.nan), 0, p * npix * 4)
-        kernel = self._kernel(write_tiles)
+        kernel = self._kernel(write_tiles, fk)
         m = self._mesh
-        kernel.set_args(self._bones_buf, m["rest"], m["idx"], m["w"], m["tris"], self._obs_buf,
-                        self._proj, np.float32(self.threshold), self._sums_buf, self._counts_buf,
-                        self._tiles_buf if write_tiles else self._sums_buf)
+        observation = self._obs_buf if self._obs_buf is not None else m["no_observation"]
+        proj = self._proj if self._obs_buf is not None else np.zeros(4, np.float32)
+        kernel.set_args(self._input_buf, m["steps"], m["links"], m["bone_data"], m["point_bone"], m["point_rest"],
+                        m["rest"], m["idx"], m["w"], m["tris"], observation, proj, np.float32(self.threshold),
+                        np.int32(render), self._sums_buf, self._counts_buf, self._points_buf,
+                        self._tiles_buf if write_tiles else self._sums_buf,
+                        self._bones_out_buf if write_tiles else self._sums_buf)
         wg = self.local_size
         run = cl.enqueue_nd_range_kernel(q, kernel, (p * wg,), (wg,))
         sums = np.empty(p, np.float32)
         counts = np.empty((p, 4), np.int32)
         down = [cl.enqueue_copy(q, sums, self._sums_buf, is_blocking=False),
                 cl.enqueue_copy(q, counts, self._counts_buf, is_blocking=False)]
+        points = None
+        if fk:
+            points = np.empty((p, npt, 4), np.float32)
+            down.append(cl.enqueue_copy(q, points, self._points_buf, is_blocking=False))
         tiles = None
         if write_tiles:
             tiles = np.empty((p, self.th, self.tw), np.float32)
@@ -237,6 +280,7 @@ class ParticleScorer:
         def dur(ev) -> float:
             return (ev.profile.end - ev.profile.start) * 1e-9
 
-        self.last_timings = {"host_s": 0.0, "upload_s": dur(up), "kernel_s": dur(run),
+        self.last_timings = {"upload_s": dur(up), "kernel_s": dur(run),
                              "readback_s": sum(dur(e) for e in down), "wall_s": wall}
-        return sums.astype(np.float64), {k: counts[:, i].astype(np.int64) for i, k in enumerate(COUNT_NAMES)}, tiles
+        return (sums.astype(np.float64), {k: counts[:, i].astype(np.int64) for i, k in enumerate(COUNT_NAMES)},
+                None if points is None else points[..., :3].astype(np.float64), tiles)

@@ -38,7 +38,6 @@ from functools import cached_property
 
 import numpy as np
 
-from swarmpose.body.kinematics import skinning_transforms, transform_points
 from swarmpose.body.skeleton import joint_weight
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
@@ -171,8 +170,10 @@ class Objective:
 
     Per frame call :meth:`set_frame`; then ``objective(h)`` returns E (P,) and
     :attr:`last_parts` holds E_D, E_J2D, E_J3D, E_J (P,) of the last call. :attr:`spent_s`
-    accumulates where the calls' time went (s): ``fk`` (bone transforms), ``score`` (the
-    depth term's launch and wait), ``joints`` (joint and penetration terms), and ``calls``.
+    accumulates where the calls' time went (s): ``score`` (the launch that computes forward
+    kinematics, the named points and the depth term, and its wait), ``fk`` (host forward
+    kinematics: 0 since it moved onto the device), ``joints`` (joint and penetration terms,
+    from the points), and ``calls``.
     ``scorer``: a :class:`~swarmpose.gpu.scorer.ParticleScorer` for the same body and intrinsics.
     """
 
@@ -215,20 +216,14 @@ class Objective:
     def uses_joints(self) -> bool:
         return self.weights.joints > 0 and self.targets.count > 0
 
-    def model_points(self, transforms: np.ndarray) -> np.ndarray:
-        """The targets' model points (P, n, 3) m for bone transforms (P, B, 3, 4)."""
-        idx = self.targets.point_index
-        return transform_points(self.body.point_bones[idx], self.body.point_rest[idx], transforms)
-
-    def penetration_cm(self, transforms: np.ndarray) -> np.ndarray:
+    def penetration_cm(self, points: np.ndarray) -> np.ndarray:
         """(P,) cm: summed depth of the elbows and wrists inside the torso's core (see
-        :data:`TORSO_RADIUS_SHARE`) for bone transforms (P, B, 3, 4).
+        :data:`TORSO_RADIUS_SHARE`) for the body's named points (P, NPT, 3) m.
 
         Depth sees only the near side of a body and the detector's far-side joints are
         guesses, so nothing in E_D or E_J stops an occluded arm from sinking into the trunk
         (a side view put the far arm 20-30 cm off, inside the torso); this term does."""
-        idx = self._penetration_points
-        pts = transform_points(self.body.point_bones[idx], self.body.point_rest[idx], transforms)
+        pts = points[:, self._penetration_points]
         arms, hip, shoulder = pts[:, :4], pts[:, 4:6].mean(axis=1), pts[:, 6:8].mean(axis=1)
         axis = shoulder - hip
         along = np.einsum("pjk,pk->pj", arms - hip[:, None], axis) / np.maximum(np.einsum("pk,pk->p", axis, axis),
@@ -263,19 +258,19 @@ class Objective:
         return order
 
     def __call__(self, h: np.ndarray) -> np.ndarray:
+        """E (P,) of poses h (P, 36): one launch of the scorer gives the depth term's sums and the
+        body's named points (forward kinematics on the device); the joint and penetration terms
+        follow from the points."""
         t0 = time.perf_counter()
-        h = np.asarray(h, dtype=np.float64)
-        transforms = skinning_transforms(self.body.rig, h)
+        sums, _, points = self.scorer.evaluate(h, render=self.uses_depth)
         w = self.weights
-        zeros = np.zeros(len(h))
+        zeros = np.zeros(len(points))
         e_d, e_2d, e_3d = zeros, zeros, zeros
         t1 = time.perf_counter()
         if self.uses_depth:
-            sums, _ = self.scorer.score_transforms(transforms.astype(np.float32))
             e_d = 100.0 * sums / self.normaliser
-        t2 = time.perf_counter()
         if self.uses_joints:
-            pts = self.model_points(transforms)
+            pts = points[:, self.targets.point_index]
             z = np.maximum(pts[..., 2:3], 1e-3)  # a point behind the camera must not flip sides
             f = np.array([self.intrinsics.fx, self.intrinsics.fy])
             c = np.array([self.intrinsics.cx, self.intrinsics.cy])
@@ -284,12 +279,11 @@ class Objective:
             e_2d = weighted_joint_distance(projected, self.targets.xy, self.targets.weight, order, self._swap_px)
             e_3d = 1000.0 * weighted_joint_distance(pts, self.targets.xyz, self.targets.weight, order)
         e_j = w.alpha * e_2d + (1.0 - w.alpha) * e_3d
-        e_p = self.penetration_cm(transforms) if w.penetration > 0 else zeros
+        e_p = self.penetration_cm(points) if w.penetration > 0 else zeros
         total = w.depth * e_d + w.joints * e_j + w.penetration * e_p
         self.last_parts = {"E": total, "E_D": e_d, "E_J": e_j, "E_J2D": e_2d, "E_J3D": e_3d, "E_P": e_p}
         spent = self.spent_s
-        spent["fk"] += t1 - t0
-        spent["score"] += t2 - t1
-        spent["joints"] += time.perf_counter() - t2
+        spent["score"] += t1 - t0
+        spent["joints"] += time.perf_counter() - t1
         spent["calls"] += 1
         return total

@@ -367,3 +367,31 @@ def test_work_group_variants_agree(builtin_body, seed):
         for tiles, sums, _ in results[1:]:
             np.testing.assert_array_equal(tiles, results[0][0])
             np.testing.assert_allclose(sums, results[0][1], rtol=1e-5)
+
+
+def test_device_forward_kinematics_matches_numpy(scorer, body, seed):
+    """The kernel's FK (bone transforms and named points) against the float64 numpy oracle on
+    poses anywhere within Table 1's limits and any root orientation (quaternions not normalised),
+    and the score of device-FK poses against the score of the oracle's transforms."""
+    from swarmpose.body.kinematics import transform_points
+
+    rng = np.random.default_rng([seed, 7])
+    h = random_poses(body, rng, 48, spread=2.0)
+    h[:, 7:] = rng.uniform(ANGLE_LIMITS[:, 0], ANGLE_LIMITS[:, 1], (48, 29))
+    h[:, 3:7] = rng.normal(size=(48, 4)) * rng.uniform(0.2, 3.0, (48, 1))  # any orientation, any length
+    want = scorer.transforms(h)
+    got = scorer.device_transforms(h)
+    assert np.abs(got - want).max() < 2e-5, f"seed {seed}"  # rotations (1) and translations (m)
+    _, _, points = scorer.evaluate(h, render=False)
+    oracle = transform_points(body.point_bones, body.point_rest, want.astype(np.float64))
+    assert points.shape == (48, len(body.point_names), 3)
+    assert np.abs(points - oracle).max() < 1e-5, f"seed {seed}"  # m
+    h_true = random_poses(body, rng, 1)[0]
+    scorer.set_observation(observation(body, h_true, rng), person_box(body, h_true[None]))
+    sums, counts = scorer.score(h)
+    oracle_sums, oracle_counts = scorer.score_transforms(want)
+    assert np.allclose(sums, oracle_sums, rtol=1e-3, atol=1e-3), f"seed {seed}"
+    for name in COUNT_NAMES:  # a float32 ulp may move a pixel centre across an edge
+        assert np.abs(counts[name] - oracle_counts[name]).max() <= 3, f"{name}, seed {seed}"
+    sums_only, counts_only, _ = scorer.evaluate(h, render=False)
+    assert not sums_only.any() and not any(c.any() for c in counts_only.values())

@@ -93,14 +93,14 @@ def test_joint_terms_by_hand(body, scene):
     targets = JointTargets.from_detection(det, depth, INTR, body)
     objective.set_frame(depth, (100, 50, 400, 400), targets, h)
     e = objective(h[None])
-    assert objective.last_parts["E_J2D"][0] == pytest.approx(5.0, abs=1e-6)
+    assert objective.last_parts["E_J2D"][0] == pytest.approx(5.0, abs=1e-4)  # float32 points from the device
     truth = body.posed_points(h[None], targets.names)[0]
     d3 = np.linalg.norm(truth - targets.xyz, axis=1)
     ok = np.isfinite(d3)
     expected_3d = 1000 * np.sum(d3[ok] * targets.weight[ok]) / targets.weight[ok].sum()
-    assert objective.last_parts["E_J3D"][0] == pytest.approx(expected_3d, rel=1e-9)
+    assert objective.last_parts["E_J3D"][0] == pytest.approx(expected_3d, rel=1e-5)  # float32 points
     assert objective.last_parts["E_P"][0] == 0.0  # a standing body: no arm inside the torso
-    assert e[0] == pytest.approx(0.97 * 5.0 + 0.03 * expected_3d)
+    assert e[0] == pytest.approx(0.97 * 5.0 + 0.03 * expected_3d, abs=1e-4)
     assert targets.weight[targets.names.index("left_hip")] == 0.2
     assert targets.weight[targets.names.index("left_wrist")] == 1.8
     low = Joints2D(COCO17, np.column_stack([det.keypoints[:, :2], np.full(17, 0.1)]), 0, 0)
@@ -140,7 +140,6 @@ def test_torso_pose_of_an_upper_body_assumes_it_upright(body):
 def test_penetration_is_the_depth_of_elbows_and_wrists_inside_the_torso_core(body):
     """Against a brute-force distance to 2001 points of the hip-to-shoulder segment; the rest
     pose pays nothing, a forearm folded into the belly pays."""
-    from swarmpose.body.kinematics import skinning_transforms
     from swarmpose.body.skeleton import ANGLE_LIMITS
     from swarmpose.tracking.objective import ARM_POINTS
 
@@ -149,7 +148,7 @@ def test_penetration_is_the_depth_of_elbows_and_wrists_inside_the_torso_core(bod
     rng = np.random.default_rng(3)
     hs = np.repeat(body.rest_pose((0.0, 0.0, 2.5), (0.0, 1.0, 0.0, 0.0))[None], 200, axis=0)
     hs[1:, 7:] = rng.uniform(ANGLE_LIMITS[:, 0], ANGLE_LIMITS[:, 1], (199, 29))  # anywhere within Table 1
-    got = objective.penetration_cm(skinning_transforms(body.rig, hs))
+    got = objective.penetration_cm(body.posed_points(hs, body.point_names))
     names = ARM_POINTS + ("left_hip", "right_hip", "left_shoulder", "right_shoulder")
     pts = body.posed_points(hs, names)
     t = np.linspace(0.0, 1.0, 2001)
@@ -194,7 +193,7 @@ def test_a_swapped_pair_costs_the_swap_and_no_more(body, scene):
         gap = np.linalg.norm(model[targets.names.index("left_wrist")] - model[targets.names.index("right_wrist")])
         wrists = 2 * targets.weight[targets.names.index("left_wrist")] / targets.weight.sum()
         expected = wrists * (SWAP_COST * targets.extent_px if swaps else gap)
-        assert objective.last_parts["E_J2D"][0] == pytest.approx(expected, rel=1e-9)
+        assert objective.last_parts["E_J2D"][0] == pytest.approx(expected, abs=1e-4)  # float32 points from the device
     assert gap > 100, "the wrists of a T-pose are far apart: the swap is worth its cost"
 
 
