@@ -10,7 +10,8 @@
  * tracking joints; it also writes the NPT named points of every particle; without FK the
  * inputs are bone transforms, P x NB x 3 x 4, and the FK tables and points are unused).
  *
- * For particle p: (FK) its bone transforms and named points from its pose; unless render is 0
+ * For particle p: (FK) its bone transforms and named points from its pose, and from those the
+ * joint and penetration terms (include/joint_term.h; terms[p]); unless render is 0
  * (a joint-term-only objective: counts and sums are then 0), skin the rest mesh with the NB
  * bone transforms (LBS, 4 influences), project
  * into the tile, rasterise a z-buffer (of 1/z, 1/m; 0 = background) and reduce over
@@ -24,6 +25,7 @@
 #include "include/raster.h"
 #if FK
 #include "include/fk.h"
+#include "include/joint_term.h"
 #endif
 
 #define NPIX (TW * TH)
@@ -67,10 +69,20 @@ void score_particles(__global const float *hyp,       /* FK: P x POSE_DIM poses;
                      __global const float *obs,       /* TH x TW observed depth, m, 0 = none */
                      const float4 proj,               /* (ax, bx, ay, by) camera -> tile */
                      const float threshold,           /* T, m */
-                     const int render,                /* 0: FK and points only */
+                     const int render,                /* 0: FK, points and terms only */
+                     __global const float4 *tgt2d,    /* the joint targets (include/joint_term.h) */
+                     __global const float4 *tgt3d,
+                     __global const int2 *pairs,
+                     __global const int *pen,
+                     const int nt,
+                     const int npair,
+                     const int with_joints,
+                     const float4 cam,
+                     const float4 scal,
                      __global float *sums,            /* P */
                      __global int4 *counts,           /* P */
                      __global float4 *points,         /* P x NPT camera frame, m (FK only) */
+                     __global float4 *terms,          /* P x (E_J2D, E_J3D, E_P, 0) (FK only) */
                      __global float *tiles,           /* P x TH x TW if WRITE_TILES, else unused */
                      __global float4 *bones_out)      /* P x NB x 3 rows [R | t] if WRITE_TILES and FK */
 {
@@ -84,11 +96,18 @@ void score_particles(__global const float *hyp,       /* FK: P x POSE_DIM poses;
 #if FK
     __local float4 ljoint_q[NJ];
     __local float4 lframe_q[NB];
+    __local float4 lpoints[NPT];
     if (lid == 0)
         forward_kinematics(hyp + p * POSE_DIM, steps, links, bone_data, ljoint_q, lframe_q, lbones);
     barrier(CLK_LOCAL_MEM_FENCE);
-    for (int i = lid; i < NPT; i += WG)
-        points[p * NPT + i] = (float4)(affine_apply(lbones + 3 * point_bone[i], point_rest[i].xyz), 0.0f);
+    for (int i = lid; i < NPT; i += WG) {
+        const float4 q = (float4)(affine_apply(lbones + 3 * point_bone[i], point_rest[i].xyz), 0.0f);
+        lpoints[i] = q;
+        points[p * NPT + i] = q;
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (lid == 0)
+        terms[p] = joint_terms(lpoints, tgt2d, tgt3d, pairs, nt, npair, cam, scal, pen, with_joints);
 #if WRITE_TILES
     for (int i = lid; i < NB * 3; i += WG)
         bones_out[p * NB * 3 + i] = lbones[i];

@@ -85,7 +85,7 @@ def bench_score(particles: int = 64, resolution: tuple[int, int] = (64, 64), bod
             sums, _ = scorer.score_transforms(transforms)
         else:
             t1 = t0
-            sums, _, _ = scorer.evaluate(h)
+            sums = scorer.evaluate(h).sums
         t2 = time.perf_counter()
         if i >= warmup:
             tm = scorer.last_timings

@@ -10,8 +10,8 @@ Reported (see :func:`bench_track`):
 
 * ``fps``: frames per second of detection + tracking over the whole sequence (the start on
   the first frame included); ``tracking_fps``: over the frames after the first;
-* ``split_ms``: per generation (objective call) of the per-frame search, medians over the
-  tracked frames: ``fk`` (bone transforms), ``score`` (the depth term's launch and wait),
+* ``split_ms``: per generation (objective call) of the per-frame search, means over the
+  tracked frames (medians over the repeats): ``fk`` (bone transforms), ``score`` (the depth term's launch and wait),
   ``joint_term`` (joint and penetration terms), ``pso_update`` (the swarm's arithmetic),
   and ``other_per_frame`` (ms per frame outside the search: detection, the box, the
   re-checks, the verdict);
@@ -62,13 +62,14 @@ def _track_once(config: ServiceConfig, frames: int) -> tuple[TrackedRun, list[di
 
 
 def _split(timings: list[dict], evaluations: int) -> dict[str, float]:
-    """Per-generation medians over the tracked frames (the first, the start, left out when there are others)."""
+    """Per-generation means over the tracked frames (the first, the start, left out when there
+    are others), so that the parts add up to the total."""
     rows = [t for t in timings[1:] if "pso" in t] or [t for t in timings if "pso" in t]
     if not rows:
         return {}
-    out = {k: float(np.median([t.get(k, 0.0) for t in rows])) / evaluations for k in SPLIT}
-    out["total"] = float(np.median([t["pso"] for t in rows])) / evaluations
-    out["other_per_frame"] = float(np.median([t["total"] - t["pso"] for t in rows]))
+    out = {k: float(np.mean([t.get(k, 0.0) for t in rows])) / evaluations for k in SPLIT}
+    out["total"] = float(np.mean([t["pso"] for t in rows])) / evaluations
+    out["other_per_frame"] = float(np.mean([t["total"] - t["pso"] for t in rows]))
     return out
 
 

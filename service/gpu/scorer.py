@@ -27,6 +27,7 @@ launch, so a result the kernel did not write cannot pass for a score.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -40,7 +41,23 @@ from swarmpose.gpu.fk_tables import fk_tables
 from swarmpose.gpu.reference import COUNT_NAMES
 from swarmpose.gpu.tile import TileBox, clip_box
 
-__all__ = ["ParticleScorer", "COUNT_NAMES"]
+__all__ = ["ParticleScorer", "Evaluation", "COUNT_NAMES"]
+
+TERM_NAMES = ("E_J2D", "E_J3D", "E_P")
+"""The objective's terms the kernel computes from the named points (see cl/include/joint_term.h)."""
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One launch's results for P poses: sums (P,) m and counts {name: (P,) int64} of the depth
+    term (0 without rendering), the named points (P, NPT, 3) m, camera frame, and the terms
+    {name: (P,)} of :data:`TERM_NAMES` (E_J2D px, E_J3D mm, E_P cm; see
+    :meth:`ParticleScorer.set_joint_targets`)."""
+
+    sums: np.ndarray
+    counts: dict[str, np.ndarray]
+    points: np.ndarray
+    terms: dict[str, np.ndarray]
 
 
 class ParticleScorer:
@@ -100,6 +117,8 @@ class ParticleScorer:
         self._observed: np.ndarray | None = None
         self._obs_buf = None
         self._tiles_buf = self._bones_out_buf = None
+        self._joint_args = (np.int32(0), np.int32(0), np.int32(0), np.zeros(4, np.float32), np.zeros(4, np.float32))
+        self.joint_targets_owner: object = None
         self._kernels: dict[tuple[bool, bool], object] = {}
         self.last_timings: dict[str, float] = {}
 
@@ -117,7 +136,11 @@ class ParticleScorer:
                   "steps": tables.steps, "links": tables.links, "bone_data": tables.bone_data,
                   "point_bone": tables.point_bone, "point_rest": tables.point_rest,
                   "no_observation": np.zeros(1, np.float32)}
-        return {k: cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a) for k, a in arrays.items()}
+        buffers = {k: cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a) for k, a in arrays.items()}
+        npt = len(tables.point_bone)
+        for name, size in (("tgt2d", npt * 16), ("tgt3d", npt * 16), ("pairs", max(npt // 2, 1) * 8), ("pen", 32)):
+            buffers[name] = cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.zeros(size, np.uint8))
+        return buffers
 
     def _kernel(self, write_tiles: bool, fk: bool):
         key = (write_tiles, fk)
@@ -133,6 +156,7 @@ class ParticleScorer:
             nb = self.defines["NB"]
             self._input_buf = cl.Buffer(self.context, cl.mem_flags.READ_ONLY, cap * max(nb * 48, POSE_DIM * 4))
             self._points_buf = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, cap * self.point_count * 16)
+            self._terms_buf = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, cap * 16)
             self._sums_buf = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, cap * 4)
             self._counts_buf = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, cap * 16)
             self._tiles_buf = self._bones_out_buf = None
@@ -164,6 +188,44 @@ class ParticleScorer:
         cl.enqueue_copy(self.queue, self._obs_buf, observed, is_blocking=True)
         self._proj = np.array(tb.projection(self.intrinsics), dtype=np.float32)
 
+    def set_joint_targets(self, xy: np.ndarray, xyz: np.ndarray, weight: np.ndarray, point_index: np.ndarray,
+                          pairs: np.ndarray, swap_px: float, torso_radius: float, penetration_index: np.ndarray,
+                          owner: object = None) -> None:
+        """Upload the frame's joint targets for the terms every launch computes (cl/include/joint_term.h).
+
+        xy: (n, 2) detected pixels; xyz: (n, 3) lifted m (NaN rows: not lifted); weight: (n,);
+        point_index: (n,) distinct indices into the body's named points; pairs: (m, 2) target
+        indices of left/right twins (left first; may match crossed at ``swap_px`` px each);
+        torso_radius: m; penetration_index: (8,) named points: 4 arm points, 2 hips, 2 shoulders.
+        n = 0: no joint term (E_J2D = E_J3D = 0). owner: who set them
+        (:attr:`joint_targets_owner`, so that objectives sharing the scorer upload theirs only when needed)."""
+        n, npt = len(point_index), self.point_count
+        if n > npt or len(np.unique(point_index)) != n or (n and not 0 <= np.min(point_index) <= np.max(point_index)
+                                                          < npt):
+            raise ShapeError(f"joint targets need distinct point indices within 0..{npt - 1}, got {point_index}")
+        pairs = np.asarray(pairs, np.int32).reshape(-1, 2)
+        tgt2d = np.zeros((npt, 4), np.float32)
+        tgt3d = np.zeros((npt, 4), np.float32)
+        lifted = np.all(np.isfinite(xyz), axis=1) if n else np.zeros(0, bool)
+        if n:
+            tgt2d[:n] = np.column_stack([xy, weight, point_index])
+            tgt3d[:n, :3] = np.where(lifted[:, None], xyz, 0.0)
+            tgt3d[:n, 3] = lifted
+        cl, q, m = self._cl, self.queue, self._mesh
+        cl.enqueue_copy(q, m["tgt2d"], tgt2d)
+        cl.enqueue_copy(q, m["tgt3d"], tgt3d)
+        if len(pairs):
+            cl.enqueue_copy(q, m["pairs"], np.ascontiguousarray(pairs))
+        cl.enqueue_copy(q, m["pen"], np.ascontiguousarray(penetration_index, np.int32), is_blocking=True)
+        w2 = float(np.sum(weight)) if n else 0.0
+        w3 = float(np.sum(np.asarray(weight)[lifted])) if n else 0.0
+        intr = self.intrinsics
+        self.joint_targets_owner = owner
+        self._joint_args = (np.int32(n), np.int32(len(pairs)), np.int32(n > 0),
+                            np.array([intr.fx, intr.fy, intr.cx, intr.cy], np.float32),
+                            np.array([swap_px, 1.0 / w2 if w2 > 0 else 0.0, 1.0 / w3 if w3 > 0 else 0.0, torso_radius],
+                                     np.float32))
+
     @property
     def tile_box(self) -> TileBox | None:
         """The (clipped) box of the current observation, or None before the first."""
@@ -182,19 +244,19 @@ class ParticleScorer:
             return np.zeros((0, self.defines["NB"], 3, 4), np.float32)
         return skinning_transforms(self.body.rig, h).astype(np.float32)
 
-    def evaluate(self, h: np.ndarray, render: bool = True) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
-        """Depth-term sums (P,) float64 (m, summed over observed tile pixels), counts {name:
-        (P,) int64} (:data:`COUNT_NAMES`) and the body's named points (P, NPT, 3) float64 m
-        (camera frame, in ``body.point_names`` order) of poses h (P, 36), forward kinematics on
-        the device. render=False: the points only (sums and counts 0; no observation needed)."""
+    def evaluate(self, h: np.ndarray, render: bool = True) -> Evaluation:
+        """One launch for poses h (P, 36), forward kinematics on the device: the depth term's
+        sums (float64, m summed over observed tile pixels) and counts (:data:`COUNT_NAMES`), the
+        body's named points (in ``body.point_names`` order) and the joint and penetration terms
+        (:class:`Evaluation`). render=False: no depth term (sums and counts 0; no observation needed)."""
         poses = np.ascontiguousarray(as_poses(h), np.float32)
-        sums, counts, points, _ = self._launch(poses, fk=True, write_tiles=False, render=render)
-        return sums, counts, points
+        sums, counts, (points, terms), _ = self._launch(poses, fk=True, write_tiles=False, render=render)
+        return Evaluation(sums, counts, points, terms)
 
     def score(self, h: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Sums and counts of :meth:`evaluate`."""
-        sums, counts, _ = self.evaluate(h)
-        return sums, counts
+        result = self.evaluate(h)
+        return result.sums, result.counts
 
     def score_transforms(self, transforms: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """As :meth:`score`, from precomputed bone transforms (P, B, 3, 4) (camera frame)."""
@@ -229,7 +291,7 @@ class ParticleScorer:
 
     def _launch(self, data: np.ndarray, fk: bool, write_tiles: bool, render: bool):
         """One launch for P particles: data is poses (P, 36) (fk) or transforms (P, NB, 3, 4),
-        float32. Returns sums, counts, points (P, NPT, 3) or None, tiles or None."""
+        float32. Returns sums, counts, (points (P, NPT, 3), terms) or None, tiles or None."""
         cl = self._cl
         if render and self._obs_buf is None:
             raise ConfigError("call set_observation(depth, box) before scoring")
@@ -239,7 +301,7 @@ class ParticleScorer:
             self.last_timings = {"upload_s": 0.0, "kernel_s": 0.0, "readback_s": 0.0, "wall_s": 0.0}
             empty = np.zeros((0, self.th, self.tw), np.float32) if write_tiles else None
             return (np.zeros(0), {k: np.zeros(0, np.int64) for k in COUNT_NAMES},
-                    np.zeros((0, npt, 3)) if fk else None, empty)
+                    (np.zeros((0, npt, 3)), {k: np.zeros(0) for k in TERM_NAMES}) if fk else None, empty)
         t1 = time.perf_counter()
         self._ensure_capacity(p, write_tiles)
         q = self.queue
@@ -248,6 +310,7 @@ class ParticleScorer:
         cl.enqueue_fill_buffer(q, self._counts_buf, np.int32(-1), 0, p * 16)
         if fk:
             cl.enqueue_fill_buffer(q, self._points_buf, np.float32(np.nan), 0, p * npt * 16)
+            cl.enqueue_fill_buffer(q, self._terms_buf, np.float32(np.nan), 0, p * 16)
         npix = self.tw * self.th
         if write_tiles:
             cl.enqueue_fill_buffer(q, self._tiles_buf, np.float32(np.nan), 0, p * npix * 4)
@@ -257,7 +320,8 @@ class ParticleScorer:
         proj = self._proj if self._obs_buf is not None else np.zeros(4, np.float32)
         kernel.set_args(self._input_buf, m["steps"], m["links"], m["bone_data"], m["point_bone"], m["point_rest"],
                         m["rest"], m["idx"], m["w"], m["tris"], observation, proj, np.float32(self.threshold),
-                        np.int32(render), self._sums_buf, self._counts_buf, self._points_buf,
+                        np.int32(render), m["tgt2d"], m["tgt3d"], m["pairs"], m["pen"], *self._joint_args,
+                        self._sums_buf, self._counts_buf, self._points_buf, self._terms_buf,
                         self._tiles_buf if write_tiles else self._sums_buf,
                         self._bones_out_buf if write_tiles else self._sums_buf)
         wg = self.local_size
@@ -266,10 +330,12 @@ class ParticleScorer:
         counts = np.empty((p, 4), np.int32)
         down = [cl.enqueue_copy(q, sums, self._sums_buf, is_blocking=False),
                 cl.enqueue_copy(q, counts, self._counts_buf, is_blocking=False)]
-        points = None
+        points = terms = None
         if fk:
             points = np.empty((p, npt, 4), np.float32)
+            terms = np.empty((p, 4), np.float32)
             down.append(cl.enqueue_copy(q, points, self._points_buf, is_blocking=False))
+            down.append(cl.enqueue_copy(q, terms, self._terms_buf, is_blocking=False))
         tiles = None
         if write_tiles:
             tiles = np.empty((p, self.th, self.tw), np.float32)
@@ -283,4 +349,6 @@ class ParticleScorer:
         self.last_timings = {"upload_s": dur(up), "kernel_s": dur(run),
                              "readback_s": sum(dur(e) for e in down), "wall_s": wall}
         return (sums.astype(np.float64), {k: counts[:, i].astype(np.int64) for i, k in enumerate(COUNT_NAMES)},
-                None if points is None else points[..., :3].astype(np.float64), tiles)
+                None if points is None else (points[..., :3].astype(np.float64),
+                                             {k: terms[:, i].astype(np.float64) for i, k in enumerate(TERM_NAMES)}),
+                tiles)

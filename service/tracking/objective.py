@@ -169,23 +169,31 @@ class Objective:
     """E(h, o) for batches of poses on one frame.
 
     Per frame call :meth:`set_frame`; then ``objective(h)`` returns E (P,) and
-    :attr:`last_parts` holds E_D, E_J2D, E_J3D, E_J (P,) of the last call. :attr:`spent_s`
-    accumulates where the calls' time went (s): ``score`` (the launch that computes forward
-    kinematics, the named points and the depth term, and its wait), ``fk`` (host forward
-    kinematics: 0 since it moved onto the device), ``joints`` (joint and penetration terms,
-    from the points), and ``calls``.
-    ``scorer``: a :class:`~swarmpose.gpu.scorer.ParticleScorer` for the same body and intrinsics.
+    :attr:`last_parts` holds E_D, E_J2D, E_J3D, E_J, E_P (P,) of the last call. One launch of
+    the scorer computes all the terms (forward kinematics, the depth term, and the joint and
+    penetration terms from the named points, cl/include/joint_term.h); :meth:`host_terms` is
+    the numpy oracle of the latter. :attr:`spent_s` accumulates where the calls' time went (s):
+    ``score`` (the launch and its wait), ``fk`` (host forward kinematics: 0 since it moved onto
+    the device), ``joints`` (combining the terms on the host), and ``calls``.
+
+    ``scorer``: a :class:`~swarmpose.gpu.scorer.ParticleScorer` for the same body and
+    intrinsics; ``coarse``: optionally a second one on a smaller tile and a coarser mesh, which
+    :attr:`coarse_active` switches the depth term to (coarse-to-fine search; E_D is normalised
+    per level, so its scale stays the same).
     """
 
     def __init__(self, body: SkinnedBody, intrinsics: Intrinsics, scorer,
-                 weights: ObjectiveWeights = ObjectiveWeights()):
+                 weights: ObjectiveWeights = ObjectiveWeights(), coarse=None):
         self.body, self.intrinsics, self.scorer, self.weights = body, intrinsics, scorer, weights
+        self.coarse = coarse
+        self.coarse_active = False
         self.targets = JointTargets.empty()
         self._penetration_points = body.point_indices(ARM_POINTS + ("left_hip", "right_hip", "left_shoulder",
                                                                     "right_shoulder"))
         self.torso_radius = TORSO_RADIUS_SHARE * float(np.linalg.norm(body.point("left_hip")
                                                                        - body.point("right_hip")))
         self.normaliser = 1.0
+        self.coarse_normaliser = 1.0
         self.has_depth = False
         self.last_parts: dict[str, np.ndarray] = {}
         self.spent_s = dict.fromkeys(SPENT_KEYS, 0.0)
@@ -195,18 +203,40 @@ class Objective:
         spent, self.spent_s = self.spent_s, dict.fromkeys(SPENT_KEYS, 0.0)
         return spent
 
+    @property
+    def levels(self) -> tuple:
+        """The scorers: the full-resolution one, then the coarse one if any."""
+        return (self.scorer,) if self.coarse is None else (self.scorer, self.coarse)
+
     def set_frame(self, depth: np.ndarray, box, targets: JointTargets, reference: np.ndarray) -> None:
-        """Upload the observation of B, set the joint targets and N_P from the reference pose (36,)."""
-        self.scorer.set_observation(depth, box)
+        """Upload the observation of B, set the joint targets and N_P from the reference pose (36,)
+        (per level)."""
         self.set_targets(targets)
-        _, counts = self.scorer.score(np.asarray(reference, float)[None])
-        observed = int(counts["observed"][0])
-        self.has_depth = observed > 0
-        self.normaliser = float(max(int(counts["close"][0]), 0.1 * observed, 1.0))
+        normalisers = []
+        for scorer in self.levels:
+            scorer.set_observation(depth, box)
+            self._upload_targets(scorer)
+            _, counts = scorer.score(np.asarray(reference, float)[None])
+            observed = int(counts["observed"][0])
+            normalisers.append(float(max(int(counts["close"][0]), 0.1 * observed, 1.0)))
+            if scorer is self.scorer:
+                self.has_depth = observed > 0
+        self.normaliser, self.coarse_normaliser = normalisers[0], normalisers[-1]
 
     def set_targets(self, targets: JointTargets) -> None:
         """The frame's joint targets alone: all a joint-term-only objective (w_D = 0) needs."""
         self.targets = targets
+
+    def _upload_targets(self, scorer) -> None:
+        """Give ``scorer`` this objective's targets unless it holds them already (objectives may
+        share a scorer)."""
+        held = scorer.joint_targets_owner
+        if held is not None and held[0] is self.targets and held[1] == self.weights.label_swaps:
+            return
+        t = self.targets
+        pairs = t.pairs if self.weights.label_swaps else np.zeros((0, 2), np.int64)
+        scorer.set_joint_targets(t.xy, t.xyz, t.weight, t.point_index, pairs, self._swap_px, self.torso_radius,
+                                 self._penetration_points, owner=(t, self.weights.label_swaps))
 
     @property
     def uses_depth(self) -> bool:
@@ -218,7 +248,8 @@ class Objective:
 
     def penetration_cm(self, points: np.ndarray) -> np.ndarray:
         """(P,) cm: summed depth of the elbows and wrists inside the torso's core (see
-        :data:`TORSO_RADIUS_SHARE`) for the body's named points (P, NPT, 3) m.
+        :data:`TORSO_RADIUS_SHARE`) for the body's named points (P, NPT, 3) m (numpy oracle of
+        the kernel's E_P).
 
         Depth sees only the near side of a body and the detector's far-side joints are
         guesses, so nothing in E_D or E_J stops an occluded arm from sinking into the trunk
@@ -257,19 +288,12 @@ class Objective:
         order[:, right] = np.where(swap, left, right)
         return order
 
-    def __call__(self, h: np.ndarray) -> np.ndarray:
-        """E (P,) of poses h (P, 36): one launch of the scorer gives the depth term's sums and the
-        body's named points (forward kinematics on the device); the joint and penetration terms
-        follow from the points."""
-        t0 = time.perf_counter()
-        sums, _, points = self.scorer.evaluate(h, render=self.uses_depth)
-        w = self.weights
+    def host_terms(self, points: np.ndarray) -> dict[str, np.ndarray]:
+        """E_J2D (px), E_J3D (mm) and E_P (cm), each (P,), of the named points (P, NPT, 3) m in
+        numpy: the oracle of the terms the kernel computes (0 where a term does not apply)."""
         zeros = np.zeros(len(points))
-        e_d, e_2d, e_3d = zeros, zeros, zeros
-        t1 = time.perf_counter()
-        if self.uses_depth:
-            e_d = 100.0 * sums / self.normaliser
-        if self.uses_joints:
+        e_2d = e_3d = zeros
+        if self.targets.count:
             pts = points[:, self.targets.point_index]
             z = np.maximum(pts[..., 2:3], 1e-3)  # a point behind the camera must not flip sides
             f = np.array([self.intrinsics.fx, self.intrinsics.fy])
@@ -278,8 +302,22 @@ class Objective:
             order = self._assignment(projected)
             e_2d = weighted_joint_distance(projected, self.targets.xy, self.targets.weight, order, self._swap_px)
             e_3d = 1000.0 * weighted_joint_distance(pts, self.targets.xyz, self.targets.weight, order)
+        return {"E_J2D": e_2d, "E_J3D": e_3d, "E_P": self.penetration_cm(points)}
+
+    def __call__(self, h: np.ndarray) -> np.ndarray:
+        """E (P,) of poses h (P, 36), from one launch of the active level's scorer."""
+        t0 = time.perf_counter()
+        scorer = self.coarse if self.coarse_active and self.coarse is not None else self.scorer
+        self._upload_targets(scorer)
+        result = scorer.evaluate(h, render=self.uses_depth)
+        t1 = time.perf_counter()
+        w = self.weights
+        zeros = np.zeros(len(result.sums))
+        e_d = 100.0 * result.sums / (self.normaliser if scorer is self.scorer else self.coarse_normaliser) \
+            if self.uses_depth else zeros
+        e_2d, e_3d = (result.terms["E_J2D"], result.terms["E_J3D"]) if self.uses_joints else (zeros, zeros)
         e_j = w.alpha * e_2d + (1.0 - w.alpha) * e_3d
-        e_p = self.penetration_cm(points) if w.penetration > 0 else zeros
+        e_p = result.terms["E_P"] if w.penetration > 0 else zeros
         total = w.depth * e_d + w.joints * e_j + w.penetration * e_p
         self.last_parts = {"E": total, "E_D": e_d, "E_J": e_j, "E_J2D": e_2d, "E_J3D": e_3d, "E_P": e_p}
         spent = self.spent_s

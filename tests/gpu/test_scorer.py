@@ -382,7 +382,7 @@ def test_device_forward_kinematics_matches_numpy(scorer, body, seed):
     want = scorer.transforms(h)
     got = scorer.device_transforms(h)
     assert np.abs(got - want).max() < 2e-5, f"seed {seed}"  # rotations (1) and translations (m)
-    _, _, points = scorer.evaluate(h, render=False)
+    points = scorer.evaluate(h, render=False).points
     oracle = transform_points(body.point_bones, body.point_rest, want.astype(np.float64))
     assert points.shape == (48, len(body.point_names), 3)
     assert np.abs(points - oracle).max() < 1e-5, f"seed {seed}"  # m
@@ -393,5 +393,5 @@ def test_device_forward_kinematics_matches_numpy(scorer, body, seed):
     assert np.allclose(sums, oracle_sums, rtol=1e-3, atol=1e-3), f"seed {seed}"
     for name in COUNT_NAMES:  # a float32 ulp may move a pixel centre across an edge
         assert np.abs(counts[name] - oracle_counts[name]).max() <= 3, f"{name}, seed {seed}"
-    sums_only, counts_only, _ = scorer.evaluate(h, render=False)
-    assert not sums_only.any() and not any(c.any() for c in counts_only.values())
+    joints_only = scorer.evaluate(h, render=False)
+    assert not joints_only.sums.any() and not any(c.any() for c in joints_only.counts.values())

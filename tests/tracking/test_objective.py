@@ -207,3 +207,36 @@ def test_turning_keeps_the_mid_hip_and_turns_the_facing(body):
         assert got[0] == pytest.approx(abs(degrees), abs=2.0)  # the torso leans a little off the turning axis
     assert np.allclose(turned(body, turned(body, h, 90.0), -90.0), h)
     assert np.array_equal(turned(body, h, 0.0), h)
+
+
+@pytest.mark.parametrize("label_swaps", [True, False])
+def test_device_joint_terms_match_the_numpy_oracle(body, scene, label_swaps):
+    """E_J2D, E_J3D and E_P computed in the kernel (from its own FK) against
+    :meth:`Objective.host_terms` (numpy) on the kernel's points: poses anywhere within Table 1,
+    a detection with its wrists and elbows swapped, noise and joints without depth."""
+    from swarmpose.body.skeleton import ANGLE_LIMITS
+
+    h, depth = scene
+    rng = np.random.default_rng()
+    names = tuple(n for n in body.point_names if n in EVAL_JOINTS)
+    truth = body.posed_points(h[None], names)[0]
+    xy = INTR.project(truth) + rng.normal(0.0, 4.0, (len(names), 2))
+    for a, b in (("left_wrist", "right_wrist"), ("left_elbow", "right_elbow")):
+        i, j = names.index(a), names.index(b)
+        xy[[i, j]] = xy[[j, i]]
+    xyz = truth + rng.normal(0.0, 0.03, truth.shape)
+    xyz[rng.random(len(names)) < 0.3] = np.nan
+    targets = JointTargets(names, body.point_indices(names), xy, xyz, rng.uniform(0.2, 1.8, len(names)))
+    objective = Objective(body, INTR, ParticleScorer(body, INTR, (32, 32)),
+                          ObjectiveWeights(label_swaps=label_swaps))
+    objective.set_frame(depth, (150, 40, 300, 420), targets, h)
+    hs = np.repeat(h[None], 128, axis=0)
+    hs[1:, 7:] = rng.uniform(ANGLE_LIMITS[:, 0], ANGLE_LIMITS[:, 1], (127, 29))
+    objective(hs)
+    oracle = objective.host_terms(objective.scorer.evaluate(hs).points)
+    assert len(targets.pairs) >= 4 and np.any(oracle["E_P"] > 0), "the case covers swaps and penetration"
+    for name in ("E_J2D", "E_J3D", "E_P"):
+        assert np.allclose(objective.last_parts[name], oracle[name], rtol=1e-4, atol=1e-3), name
+    objective.set_targets(JointTargets.empty())
+    objective(hs)
+    assert not objective.last_parts["E_J2D"].any() and not objective.last_parts["E_J3D"].any()
