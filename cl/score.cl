@@ -11,15 +11,17 @@
  * inputs are bone transforms, P x NB x 3 x 4, and the FK tables and points are unused).
  *
  * For particle p: (FK) its bone transforms and named points from its pose, and from those the
- * joint and penetration terms (include/joint_term.h; terms[p]); unless render is 0
+ * joint and penetration terms (include/joint_term.h); unless render is 0
  * (a joint-term-only objective: counts and sums are then 0), skin the rest mesh with the NB
  * bone transforms (LBS, 4 influences), project
  * into the tile, rasterise a z-buffer (of 1/z, 1/m; 0 = background) and reduce over
  * the tile pixels with an observation d_o > 0:
- *   sums[p]      = sum of min(|d_h - d_o|, T), where a pixel the model does not cover has
+ * Results, one float8 per particle: (sum, counts.x, .y, .z, .w, E_J2D, E_J3D, E_P), the counts as
+ * exact floats (tiles hold fewer than 2^24 pixels), so that one read returns everything:
+ *   sum          = sum of min(|d_h - d_o|, T), where a pixel the model does not cover has
  *                  d_h = 0 and so contributes min(d_o, T) (= T for any d_o >= T);
- *   counts[p].x  = observed pixels (d_o > 0), .y = rendered pixels (whole tile),
- *   counts[p].z  = rendered and observed, .w = rendered, observed and |d_h - d_o| < T.
+ *   counts.x     = observed pixels (d_o > 0), .y = rendered pixels (whole tile),
+ *   counts.z     = rendered and observed, .w = rendered, observed and |d_h - d_o| < T.
  */
 #include "include/skin.h"
 #include "include/raster.h"
@@ -47,6 +49,17 @@ inline void reduce_pixel(const int zi, const float d_o, const float threshold, f
         cnt->z += rendered;
         cnt->w += rendered && diff < threshold;
     }
+}
+
+/* The depth term's sum and counts into the particle's results (its first five floats). */
+inline void store_depth_term(__global float *results, const int p, const float sum, const int4 cnt)
+{
+    __global float *r = results + 8 * p;
+    r[0] = sum;
+    r[1] = (float)cnt.x;
+    r[2] = (float)cnt.y;
+    r[3] = (float)cnt.z;
+    r[4] = (float)cnt.w;
 }
 
 inline int hsum8(const int8 v)
@@ -79,10 +92,8 @@ void score_particles(__global const float *hyp,       /* FK: P x POSE_DIM poses;
                      const int with_joints,
                      const float4 cam,
                      const float4 scal,
-                     __global float *sums,            /* P */
-                     __global int4 *counts,           /* P */
+                     __global float *results,         /* P x 8 (see above) */
                      __global float4 *points,         /* P x NPT camera frame, m (FK only) */
-                     __global float4 *terms,          /* P x (E_J2D, E_J3D, E_P, 0) (FK only) */
                      __global float *tiles,           /* P x TH x TW if WRITE_TILES, else unused */
                      __global float4 *bones_out)      /* P x NB x 3 rows [R | t] if WRITE_TILES and FK */
 {
@@ -106,16 +117,19 @@ void score_particles(__global const float *hyp,       /* FK: P x POSE_DIM poses;
         points[p * NPT + i] = q;
     }
     barrier(CLK_LOCAL_MEM_FENCE);
-    if (lid == 0)
-        terms[p] = joint_terms(lpoints, tgt2d, tgt3d, pairs, nt, npair, cam, scal, pen, with_joints);
+    if (lid == 0) {
+        const float4 t = joint_terms(lpoints, tgt2d, tgt3d, pairs, nt, npair, cam, scal, pen, with_joints);
+        results[8 * p + 5] = t.x;
+        results[8 * p + 6] = t.y;
+        results[8 * p + 7] = t.z;
+    }
 #if WRITE_TILES
     for (int i = lid; i < NB * 3; i += WG)
         bones_out[p * NB * 3 + i] = lbones[i];
 #endif
     if (!render) {
         if (lid == 0) {
-            sums[p] = 0.0f;
-            counts[p] = (int4)(0);
+            store_depth_term(results, p, 0.0f, (int4)(0));
         }
         return;
     }
@@ -180,8 +194,9 @@ void score_particles(__global const float *hyp,       /* FK: P x POSE_DIM poses;
         }
         total += row;
     }
-    sums[p] = ((total.s0 + total.s1) + (total.s2 + total.s3)) + ((total.s4 + total.s5) + (total.s6 + total.s7));
-    counts[p] = (int4)(hsum8(c_obs), hsum8(c_ren), hsum8(c_both), hsum8(c_close));
+    store_depth_term(results, p,
+                     ((total.s0 + total.s1) + (total.s2 + total.s3)) + ((total.s4 + total.s5) + (total.s6 + total.s7)),
+                     (int4)(hsum8(c_obs), hsum8(c_ren), hsum8(c_both), hsum8(c_close)));
 #elif WG == 1
     float total = 0.0f;
     int4 cnt = (int4)(0);
@@ -191,8 +206,7 @@ void score_particles(__global const float *hyp,       /* FK: P x POSE_DIM poses;
             reduce_pixel(zbuf[y * TW + x], obs[y * TW + x], threshold, &row, &cnt);
         total += row;
     }
-    sums[p] = total;
-    counts[p] = cnt;
+    store_depth_term(results, p, total, cnt);
 #else
     __local float lsum[WG];
     __local int4 lcnt[WG];
@@ -211,8 +225,7 @@ void score_particles(__global const float *hyp,       /* FK: P x POSE_DIM poses;
         barrier(CLK_LOCAL_MEM_FENCE);
     }
     if (lid == 0) {
-        sums[p] = lsum[0];
-        counts[p] = lcnt[0];
+        store_depth_term(results, p, lsum[0], lcnt[0]);
     }
 #endif
 

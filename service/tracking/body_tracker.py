@@ -43,7 +43,7 @@ from swarmpose.tracking.config import MODE_WEIGHTS, TrackerConfig
 from swarmpose.tracking.init_pose import FACINGS_DEG, torso_pose, turned
 from swarmpose.tracking.lift import lift_eval_joints
 from swarmpose.tracking.objective import JointTargets, Objective
-from swarmpose.tracking.pso import minimise
+from swarmpose.tracking.pso import PsoResult, minimise
 from swarmpose.tracking.result import BodyResult, lost_body
 
 HISTORY = 5
@@ -76,7 +76,13 @@ class BodyTracker:
         if config.mode != "lift":
             context = context or ClContext.for_spec(config.device)
             scorer = ParticleScorer(self.body, intrinsics, config.tile, threshold=config.threshold_m, context=context)
-            self.objective = Objective(self.body, intrinsics, scorer, self.weights)
+            coarse = None
+            if config.coarse_share > 0:
+                coarse_body = (self.body if len(self.body.triangles) <= config.coarse_triangles
+                               else self.body.tracking_lod(config.coarse_triangles))
+                coarse = ParticleScorer(coarse_body, intrinsics, config.coarse_tile, threshold=config.threshold_m,
+                                        context=context)
+            self.objective = Objective(self.body, intrinsics, scorer, self.weights, coarse)
         self.history: list[np.ndarray] = []
         self.previous: np.ndarray | None = None
         self.lo, self.hi = search.pose_bounds()
@@ -150,7 +156,7 @@ class BodyTracker:
         t1 = time.perf_counter()
         self.objective.set_frame(depth, self._box(centre, targets), targets, centre)
         self.objective.take_spent()
-        result = minimise(self.objective, start, self.lo, self.hi, rng, pso, search.renormalise, search.perturb)
+        result = self._search(self.objective, start, rng, pso)
         timings["pso"] = 1000 * (time.perf_counter() - t1)
         timings.update(search_split(self.objective.take_spent(), timings["pso"]))
         best = result.best
@@ -212,7 +218,8 @@ class BodyTracker:
                                         replace(weights, depth=0.0, joints=1.0))
             joint_objective.set_targets(targets)
         start_objective = (self.objective if weights == self.weights
-                           else Objective(self.body, self.intrinsics, self.objective.scorer, weights))
+                           else Objective(self.body, self.intrinsics, self.objective.scorer, weights,
+                                          self.objective.coarse))
         start_objective.set_frame(depth, box, targets, centre)
         # the start runs once per track, so it gets at least config.start_budget: at p = g = 32 a
         # side view's start did not converge (151 deg off, 215 mm; BENCHMARKS.md, issue 12)
@@ -228,13 +235,11 @@ class BodyTracker:
             facing = turned(self.body, centre, degrees)
             start = search.spread(facing, pso.particles, rng, np.full(3, 0.08), 0.3, 1.0)
             start[0] = facing
-            fit = minimise(joint_objective or start_objective, start, self.lo, self.hi, rng, pso,
-                           search.renormalise, search.perturb).best
+            fit = self._search(joint_objective or start_objective, start, rng, pso).best
             if joint_objective is not None:
                 start = search.spread(fit, pso.particles, rng, np.full(3, 0.04), 0.1, 0.3)
                 start[0] = fit
-                fit = minimise(start_objective, start, self.lo, self.hi, rng, pso, search.renormalise,
-                               search.perturb).best
+                fit = self._search(start_objective, start, rng, pso).best
             fits.append(fit)
         energy = start_objective(np.stack(fits))
         timings["init" if first else "recheck"] = 1000 * (time.perf_counter() - t)
@@ -252,6 +257,19 @@ class BodyTracker:
         if centre is None:
             return []
         return self._initialise(centre, targets, depth, rng, timings, max(self.config.generations // 4, 1))[:2]
+
+    def _search(self, objective: Objective, start: np.ndarray, rng: np.random.Generator, pso) -> PsoResult:
+        """One PSO of ``objective`` from ``start`` (P, 36): coarse to fine when the objective
+        renders and has a coarse level (the first ``config.coarse_share`` of the generations on
+        it), else at full resolution throughout."""
+        coarse = objective.uses_depth and objective.coarse is not None
+        refine_at = self.config.refine_at(pso.generations) if coarse else 0
+        objective.coarse_active = refine_at > 0
+        try:
+            return minimise(objective, start, self.lo, self.hi, rng, pso, search.renormalise, search.perturb,
+                            refine_at=refine_at, refine=objective.use_full_resolution)
+        finally:
+            objective.coarse_active = False
 
     def _smooth(self, best: np.ndarray) -> np.ndarray:
         a = self.config.smoothing

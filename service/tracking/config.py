@@ -27,6 +27,13 @@ class TrackerConfig:
     joints_weight: float | None = setting(None, "w_J (auto: the mode's)", kind="float?", minimum=0)
     tile: tuple[int, int] = setting((64, 64), "depth tile WxH pixels over the person's box", kind="size")
     triangles: int = setting(1500, "tracking level of detail of the body mesh, triangles", minimum=100)
+    coarse_share: float = setting(0.0, "share of each PSO's generations scored coarse (coarse_tile, "
+                                       "coarse_triangles) before the rest at full resolution (0 = off: every "
+                                       "schedule measured cost accuracy, BENCHMARKS.md issue 13)",
+                                  minimum=0.0, maximum=1.0)
+    coarse_tile: tuple[int, int] = setting((32, 32), "depth tile WxH pixels of the coarse generations", kind="size")
+    coarse_triangles: int = setting(500, "level of detail of the body mesh in the coarse generations, triangles",
+                                    minimum=100)
     seed: int = setting(0, "PSO seed (a run repeats exactly with the same seed)", minimum=0)
     start_budget: int = setting(64, "the start's PSOs per facing run at least this many particles and generations "
                                     "(once per track)", minimum=1)
@@ -50,6 +57,11 @@ class TrackerConfig:
 
     def __post_init__(self) -> None:
         check_settings(self)
+
+    def refine_at(self, generations: int) -> int:
+        """The generation of a ``generations``-long PSO from which it scores at full resolution
+        (0: all of them)."""
+        return min(int(round(self.coarse_share * generations)), generations)
 
     @property
     def pso_config(self) -> PsoConfig:

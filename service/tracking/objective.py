@@ -203,6 +203,10 @@ class Objective:
         spent, self.spent_s = self.spent_s, dict.fromkeys(SPENT_KEYS, 0.0)
         return spent
 
+    def use_full_resolution(self) -> None:
+        """Score at full resolution from now on (the end of a coarse-to-fine search)."""
+        self.coarse_active = False
+
     @property
     def levels(self) -> tuple:
         """The scorers: the full-resolution one, then the coarse one if any."""
@@ -309,7 +313,7 @@ class Objective:
         t0 = time.perf_counter()
         scorer = self.coarse if self.coarse_active and self.coarse is not None else self.scorer
         self._upload_targets(scorer)
-        result = scorer.evaluate(h, render=self.uses_depth)
+        result = scorer.evaluate(h, render=self.uses_depth, points=False)
         t1 = time.perf_counter()
         w = self.weights
         zeros = np.zeros(len(result.sums))

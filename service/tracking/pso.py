@@ -86,12 +86,18 @@ def _step_within(x: np.ndarray, v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -
 def minimise(objective: Callable[[np.ndarray], np.ndarray], start: np.ndarray, lo: np.ndarray, hi: np.ndarray,
              rng: np.random.Generator, config: PsoConfig = PsoConfig(),
              project: Callable[[np.ndarray], np.ndarray] | None = None,
-             perturb: Callable[[np.ndarray, np.random.Generator], np.ndarray] | None = None) -> PsoResult:
+             perturb: Callable[[np.ndarray, np.random.Generator], np.ndarray] | None = None,
+             refine_at: int = 0, refine: Callable[[], None] | None = None) -> PsoResult:
     """Minimise ``objective`` (P, D) -> (P,) from initial positions ``start`` (P, D).
 
     lo, hi: (D,) bounds (±inf allowed); start is clipped into them. Generation 0 evaluates
     the start; each of ``config.generations`` further generations moves and evaluates all
     particles, so the objective sees ``P·(G + 1)`` hypotheses.
+
+    Coarse to fine: with ``refine`` and 0 < ``refine_at`` <= G, ``refine()`` is called before
+    generation ``refine_at`` (it switches ``objective`` to its final, finer form) and the
+    personal bests are scored again with it (P more hypotheses), so that values of the two
+    forms never compete.
     """
     x = np.clip(np.array(start, dtype=np.float64), lo, hi)
     if project is not None:
@@ -105,7 +111,14 @@ def minimise(objective: Callable[[np.ndarray], np.ndarray], start: np.ndarray, l
     history = [pbest_val[g]]
     omega = config.omega
     perturbing = config.variant == "perturbed" and perturb is not None
+    evaluations = p_count * (config.generations + 1)
     for k in range(1, config.generations + 1):
+        if refine is not None and k == refine_at:
+            refine()
+            pbest_val = np.asarray(objective(pbest), dtype=np.float64)
+            pbest_val = np.where(np.isfinite(pbest_val), pbest_val, np.inf)
+            g = int(np.argmin(pbest_val))
+            evaluations += p_count
         r1, r2 = rng.random((2, p_count, dim))
         pull = config.c1 * r1 * (pbest - x) + config.c2 * r2 * (pbest[g] - x)
         v = omega * (v + pull) if config.update == "constriction" else pull + omega * v
@@ -127,4 +140,4 @@ def minimise(objective: Callable[[np.ndarray], np.ndarray], start: np.ndarray, l
         pbest[better], pbest_val[better] = x[better], values[better]
         g = int(np.argmin(pbest_val))
         history.append(pbest_val[g])
-    return PsoResult(pbest[g].copy(), float(pbest_val[g]), np.array(history), p_count * (config.generations + 1))
+    return PsoResult(pbest[g].copy(), float(pbest_val[g]), np.array(history), evaluations)

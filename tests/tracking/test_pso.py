@@ -107,3 +107,23 @@ def test_bad_configs():
     for kw in ({"particles": 0}, {"generations": 0}, {"variant": "x"}, {"update": "y"}, {"perturb_every": 0}):
         with pytest.raises(ConfigError):
             PsoConfig(**kw)
+
+
+def test_refine_switches_the_objective_once_and_rescores_the_personal_bests():
+    """A coarse objective (shifted optimum) for the first half, the true one after: the result
+    is the true optimum's, its value the true objective's, and P more evaluations are counted."""
+    calls = {"coarse": 0, "fine": 0}
+    state = {"fine": False}
+
+    def objective(x: np.ndarray) -> np.ndarray:
+        calls["fine" if state["fine"] else "coarse"] += len(x)
+        centre = 0.0 if state["fine"] else 0.3
+        return np.sum((x - centre) ** 2, axis=1)
+
+    rng = np.random.default_rng(5)
+    start = rng.uniform(-1, 1, (32, 4))
+    result = minimise(objective, start, np.full(4, -1.0), np.full(4, 1.0), rng, PsoConfig(32, 40),
+                      refine_at=20, refine=lambda: state.update(fine=True))
+    assert calls == {"coarse": 32 * 20, "fine": 32 * 21 + 32}  # generations 20..40 and the rescoring
+    assert result.evaluations == 32 * 41 + 32
+    assert np.allclose(result.best, 0.0, atol=0.02) and result.value == pytest.approx(np.sum(result.best ** 2))

@@ -134,3 +134,19 @@ def test_an_absurd_detection_does_not_stop_the_track(body, sequence):
     assert after.state == "tracking"
     truth = load_ground_truth(sequence).joints3d[2]
     assert 1000 * np.mean(np.linalg.norm(after.joints3d - truth, axis=1)) < 120
+
+
+def test_coarse_to_fine_tracks_and_ends_at_full_resolution(body, sequence):
+    """With a coarse share the search scores most generations on the coarse level, the last at
+    full resolution (the reported E_D is the full level's), and still tracks the walk."""
+    results = track(body, sequence, coarse_share=0.75, coarse_tile=(24, 24), coarse_triangles=300)
+    assert [r.state for r in results] == ["init"] + ["tracking"] * (FRAMES - 1)
+    assert np.mean(errors_mm(results, sequence)) < 60
+    intr = Intrinsics.load(sequence / "intrinsic.json")
+    tracker = BodyTracker(body, intr, TrackerConfig(**{**SMALL, "coarse_share": 0.75}))
+    assert tracker.objective.coarse.tw == 32 and len(tracker.objective.coarse.body.triangles) <= 500
+    frame, det = next(frames_of(sequence))
+    result = tracker.step(frame, det)
+    assert not tracker.objective.coarse_active
+    tracker.objective(result.pose[None])  # scored again at full resolution: the same E_D
+    assert tracker.objective.last_parts["E_D"][0] == pytest.approx(result.objective["E_D"], rel=1e-6)
