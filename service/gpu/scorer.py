@@ -360,9 +360,10 @@ class ParticleScorer:
 
         self.last_timings = {"upload_s": dur(up), "kernel_s": dur(run),
                              "readback_s": sum(dur(e) for e in down), "wall_s": wall}
-        counts = {k: results[:, 1 + i].astype(np.int64) for i, k in enumerate(COUNT_NAMES)}
-        if not np.all(np.isfinite(results[:, :5])):  # a result the kernel did not write
-            counts = {k: np.where(np.isfinite(results[:, 1 + i]), v, -1) for i, (k, v) in enumerate(counts.items())}
+        packed = results[:, 1:5]
+        if not np.all(np.isfinite(packed)):  # a result the kernel did not write: -1, as a poisoned count
+            packed = np.where(np.isfinite(packed), packed, -1.0)
+        counts = {k: packed[:, i].astype(np.int64) for i, k in enumerate(COUNT_NAMES)}
         extra = None
         if fk:
             extra = (None if points is None else points[..., :3].astype(np.float64),
