@@ -101,7 +101,8 @@ def detector_errors(detections: list, truth2d: np.ndarray) -> tuple[float | None
 class TrackedRun:
     """One source tracked against its ground truth: estimates and truth (F, J, 3) m in
     ``EVAL_JOINTS`` order (NaN rows where the body was lost), the detections (Joints2D or
-    None per frame), lost frames, the run's summary and the camera."""
+    None per frame), lost frames, the run's summary, the camera and every frame's timings
+    (ms, the frame message's ``timings_ms``)."""
 
     estimates: np.ndarray
     truth: np.ndarray
@@ -109,12 +110,13 @@ class TrackedRun:
     lost: int
     summary: RunSummary
     intrinsics: Intrinsics
+    timings: list[dict[str, float]]
 
 
 def track_with_truth(config: ServiceConfig, frames: int = 0) -> TrackedRun:
     """Track ``config``'s source (its first ``frames``; 0 = all) and collect estimates beside its ground truth."""
     summary = RunSummary()
-    estimates, detections, done, lost = [], [], [], 0
+    estimates, detections, timings, done, lost = [], [], [], [], 0
     with ExitStack() as stack:
         parts = open_parts(config, stack, score=False, need_ground_truth=True)
         truth_of = parts.source.ground_truth
@@ -125,10 +127,11 @@ def track_with_truth(config: ServiceConfig, frames: int = 0) -> TrackedRun:
             lost += not found
             estimates.append(body.joints3d if found else np.full((len(EVAL_JOINTS), 3), np.nan))
             detections.append(body.detection if body is not None else None)
+            timings.append(dict(result.timings_ms))
             done.append(result.index)
     truth = truth_of.joints3d[[truth_of.row(f) for f in done]]
     return TrackedRun(np.asarray(estimates, float).reshape(-1, len(EVAL_JOINTS), 3), truth, detections, lost,
-                      summary, intrinsics)
+                      summary, intrinsics, timings)
 
 
 def scores(run: TrackedRun) -> dict:

@@ -11,8 +11,9 @@ Reported (see :func:`bench_track`):
 * ``fps``: frames per second of detection + tracking over the whole sequence (the start on
   the first frame included); ``tracking_fps``: over the frames after the first;
 * ``split_ms``: per generation (objective call) of the per-frame search, means over the
-  tracked frames (medians over the repeats): ``fk`` (bone transforms), ``score`` (the depth term's launch and wait),
-  ``joint_term`` (joint and penetration terms), ``pso_update`` (the swarm's arithmetic),
+  tracked frames (medians over the repeats): ``score`` (the launch and its wait: forward
+  kinematics, the depth term and the joint terms on the device), ``joint_term`` (combining
+  the terms on the host), ``pso_update`` (the swarm's arithmetic),
   and ``other_per_frame`` (ms per frame outside the search: detection, the box, the
   re-checks, the verdict);
 * ``mpjpe_mm`` Δ and ``A100`` against the ground truth.
@@ -21,44 +22,19 @@ Reported (see :func:`bench_track`):
 from __future__ import annotations
 
 import tempfile
-from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 
-from swarmpose.bench.accuracy import TrackedRun, scores
+from swarmpose.bench.accuracy import scores, track_with_truth
 from swarmpose.body.loader import load_body
-from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.core.progress import progress_bar
 from swarmpose.motion.library import load_motion_spec
 from swarmpose.pipeline.config import ServiceConfig
-from swarmpose.pipeline.run import RunSummary, results
-from swarmpose.pipeline.service import open_parts
 from swarmpose.sim.synth import SynthConfig, synthesize
 from swarmpose.tracking.config import TrackerConfig
 
-SPLIT = ("fk", "score", "joint_term", "pso_update")
-
-
-def _track_once(config: ServiceConfig, frames: int) -> tuple[TrackedRun, list[dict]]:
-    """One run over the folder: the tracked run and every frame's timings (ms)."""
-    summary = RunSummary()
-    estimates, timings, done, lost = [], [], [], 0
-    with ExitStack() as stack:
-        parts = open_parts(config, stack, score=False, need_ground_truth=True)
-        truth_of = parts.source.ground_truth
-        for result in results(parts.source, parts.pipeline, frames, summary):
-            body = result.bodies[0] if result.bodies else None
-            found = body is not None and body.state != "lost"
-            lost += not found
-            estimates.append(body.joints3d if found else np.full((len(EVAL_JOINTS), 3), np.nan))
-            timings.append(dict(result.timings_ms))
-            done.append(result.index)
-        intrinsics = parts.source.intrinsics
-    truth = truth_of.joints3d[[truth_of.row(f) for f in done]]
-    run = TrackedRun(np.asarray(estimates, float).reshape(-1, len(EVAL_JOINTS), 3), truth, [None] * len(done),
-                     lost, summary, intrinsics)
-    return run, timings
+SPLIT = ("score", "joint_term", "pso_update")
 
 
 def _split(timings: list[dict], evaluations: int) -> dict[str, float]:
@@ -88,19 +64,20 @@ def bench_track(body: str = "builtin", shape: str | None = None, motion: str = "
         runs = []
         with progress_bar("bench track", repeats, enabled=progress, unit="run") as bar:
             for _ in range(repeats):
-                runs.append(_track_once(config, frames))
+                runs.append(track_with_truth(config, frames))
                 bar.update(1)
     evaluations = tracker.generations + 1
-    fps = [r.summary.fps for r, _ in runs]
-    tracking_fps = [1000.0 * (len(t) - 1) / sum(x["total"] for x in t[1:]) if len(t) > 1 else 0.0 for _, t in runs]
-    splits = [_split(t, evaluations) for _, t in runs]
-    run, timings = runs[0]
-    score = scores(run)
+    fps = [r.summary.fps for r in runs]
+    tracking_fps = [1000.0 * (len(r.timings) - 1) / sum(x["total"] for x in r.timings[1:]) if len(r.timings) > 1
+                    else 0.0 for r in runs]
+    splits = [_split(r.timings, evaluations) for r in runs]
+    timings = runs[0].timings
+    score = scores(runs[0])
     return {
         "body": model.name, "motion": motion, "frames": len(timings), "repeats": repeats,
         "particles": tracker.particles, "generations": tracker.generations, "tile": list(tracker.tile),
         "triangles": tracker.triangles, "fps": float(np.median(fps)), "tracking_fps": float(np.median(tracking_fps)),
-        "fps_runs": fps, "first_frame_ms": float(np.median([t[0]["total"] for _, t in runs])),
+        "fps_runs": fps, "first_frame_ms": float(np.median([r.timings[0]["total"] for r in runs])),
         "split_ms": {k: float(np.median([s[k] for s in splits])) for k in splits[0]} if splits[0] else {},
         "hypotheses_per_s": float(np.median(tracking_fps)) * tracker.particles * evaluations,
         "mpjpe_mm": score["mpjpe_mm"], "A100": score["A100"], "lost": score["lost"],
@@ -120,7 +97,7 @@ def format_track_bench(result: dict) -> str:
         f"{result['lost']} frames lost",
     ]
     if s:
-        lines.append(f"per generation (ms): FK {s['fk']:.2f}, depth score {s['score']:.2f}, joint term "
-                     f"{s['joint_term']:.2f}, PSO update {s['pso_update']:.2f}, total {s['total']:.2f}; "
+        lines.append(f"per generation (ms): launch (FK, depth and joint terms) {s['score']:.2f}, combining the "
+                     f"terms {s['joint_term']:.2f}, PSO update {s['pso_update']:.2f}, total {s['total']:.2f}; "
                      f"outside the search {s['other_per_frame']:.1f} ms per frame")
     return "\n".join(lines)

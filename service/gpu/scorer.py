@@ -3,10 +3,11 @@
 Per frame, :meth:`ParticleScorer.set_observation` resamples the observed depth inside the
 person's box B to a TW x TH tile (see :mod:`swarmpose.gpu.tile`) and uploads it. Per
 generation, :meth:`ParticleScorer.evaluate` uploads the P poses (P x 36 float32), launches
-``cl/score.cl`` once (one work-group per particle: forward kinematics, the named points,
-skin, project, rasterise a local z-buffer, reduce) and reads back per-particle sums (P,),
-counts (P, 4) and the named points (P, NPT, 3), which the joint term uses; with
-``render=False`` only the FK and the points (a joint-term-only objective).
+``cl/score.cl`` once (one work-group per particle: forward kinematics, the named points, the
+joint and penetration terms against the targets of :meth:`ParticleScorer.set_joint_targets`,
+skin, project, rasterise a local z-buffer, reduce) and reads back one packed result per
+particle: the depth term's sum and counts and the three terms (the named points, P x NPT x
+3, only when asked); with ``render=False`` no depth term (a joint-term-only objective).
 :meth:`ParticleScorer.score_transforms` scores bone transforms computed elsewhere (the
 numpy FK, :meth:`ParticleScorer.transforms`, the oracle of the device's).
 
@@ -102,15 +103,17 @@ class ParticleScorer:
         if wg > 1 and not self.atomic:
             raise ConfigError("local_size > 1 needs atomic=True (work-items share the z-buffer)")
         nv, nf, nb = len(body.vertices), len(body.triangles), len(body.bone_names)
-        need = nb * 48 + (nb + 16) * 16 + nv * 24 + self.tw * self.th * 4 + (wg * 20 if wg > 1 else nf * 4)
+        tables = fk_tables(body)
+        sizes = tables.defines  # FK scratch: NJ joint and NB frame quaternions, NPT points (float4 each)
+        need = (nb * 48 + (nb + sizes["NJ"] + sizes["NPT"]) * 16 + nv * 24 + self.tw * self.th * 4
+                + (wg * 20 if wg > 1 else nf * 4))
         if need > self.device.local_mem_size:
             raise ConfigError(f"{body.name} ({nv} vertices) with a {self.tw}x{self.th} tile needs {need} bytes of "
                               f"local memory, {describe(self.device)} has {self.device.local_mem_size}; "
                               "use a smaller tracking LOD (body.tracking_lod) or tile")
-        tables = fk_tables(body)
         self.point_count = len(tables.point_bone)
         self.defines = {"NV": nv, "NF": nf, "NB": nb, "TW": self.tw, "TH": self.th, "WG": wg,
-                        "ZATOMIC": self.atomic, "CULL": bool(cull_backfaces), "ZNEAR": float(znear), **tables.defines}
+                        "ZATOMIC": self.atomic, "CULL": bool(cull_backfaces), "ZNEAR": float(znear), **sizes}
         self._mesh = self._upload_mesh(body, tables)
         self._capacity = 0
         self._tile_box: TileBox | None = None

@@ -52,7 +52,7 @@ IMAGE_MARGIN = 0.5
 """Keypoints up to this share of the image's width/height outside it still count (a foot cut
 off by the frame's edge); farther ones are ignored."""
 
-SPENT_KEYS = ("fk", "score", "joints", "calls")
+SPENT_KEYS = ("score", "joints", "calls")
 """The parts of :attr:`Objective.spent_s`."""
 
 ARM_POINTS = ("left_elbow", "right_elbow", "left_wrist", "right_wrist")
@@ -173,8 +173,8 @@ class Objective:
     the scorer computes all the terms (forward kinematics, the depth term, and the joint and
     penetration terms from the named points, cl/include/joint_term.h); :meth:`host_terms` is
     the numpy oracle of the latter. :attr:`spent_s` accumulates where the calls' time went (s):
-    ``score`` (the launch and its wait), ``fk`` (host forward kinematics: 0 since it moved onto
-    the device), ``joints`` (combining the terms on the host), and ``calls``.
+    ``score`` (the launch and its wait: forward kinematics and every term on the device),
+    ``joints`` (combining the terms on the host), and ``calls``.
 
     ``scorer``: a :class:`~swarmpose.gpu.scorer.ParticleScorer` for the same body and
     intrinsics; ``coarse``: optionally a second one on a smaller tile and a coarser mesh, which

@@ -30,7 +30,7 @@ def test_bench_track_splits_the_search_and_scores_the_run(capsys):
     result = json.loads(capsys.readouterr().out)
     assert result["frames"] == 4 and result["particles"] == 8 and result["generations"] == 4
     split = result["split_ms"]
-    parts = split["fk"] + split["score"] + split["joint_term"] + split["pso_update"]
+    parts = split["score"] + split["joint_term"] + split["pso_update"]
     assert parts == pytest.approx(split["total"], rel=0.05)  # the parts account for the search
     assert result["hypotheses_per_s"] == pytest.approx(result["tracking_fps"] * 8 * 5)
     assert len(result["fps_runs"]) == 2 and result["fps"] > 0
