@@ -1,4 +1,9 @@
-"""``swarmpose synth`` (a synthetic RGBD sequence with ground truth) and ``swarmpose body``."""
+"""``swarmpose synth`` (a synthetic RGBD sequence with ground truth) and ``swarmpose body``.
+
+``synth`` films one person (``--body``, ``--shape``, ``--motion``) or a scene of several
+(``--person BODY:SHAPE:MOTION[@x,z[,yaw]]`` repeated, or ``--scene FILE``; see
+:mod:`swarmpose.sim.scene`).
+"""
 
 from __future__ import annotations
 
@@ -10,8 +15,10 @@ from swarmpose.body.gltf_write import save_glb
 from swarmpose.body.loader import load_body
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.cli.common import DEFAULTS, add_body_options, positive_int, quiet
+from swarmpose.core.errors import ConfigError
 from swarmpose.motion.library import load_motion_spec
-from swarmpose.sim.synth import SynthConfig, synthesize
+from swarmpose.sim.scene import PersonSpec, load_people, load_scene_file, parse_person_spec
+from swarmpose.sim.synth import SynthConfig, synthesize, synthesize_people
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
@@ -20,6 +27,15 @@ def cmd_synth(args: argparse.Namespace) -> int:
                          camera_yaw_deg=args.camera_yaw, camera_height=args.camera_height,
                          layout=args.layout, skinning=args.skinning)
     config.validate()
+    specs = scene_specs(args)
+    if specs is not None:
+        people = load_people(specs, args.frames, args.fps)
+        summary = synthesize_people(people, Path(args.out), config, progress=not quiet(args))
+        print_synth_summary(summary, people[0].body)
+        return 0
+    if args.motion is None:
+        raise ConfigError("synth needs --motion (one person) or --person BODY:SHAPE:MOTION[@x,z[,yaw[,start]]] / "
+                          "--scene FILE (several)")
     body = load_body(args.body, args.shape)
     motion = load_motion_spec(args.motion, body, args.frames, args.fps)
     summary = synthesize(body, motion, Path(args.out), config,
@@ -28,14 +44,34 @@ def cmd_synth(args: argparse.Namespace) -> int:
     return 0
 
 
+def scene_specs(args: argparse.Namespace) -> list[PersonSpec] | None:
+    """The people of ``--person`` / ``--scene``, or None when neither is given (one ``--body``)."""
+    if not args.person and not args.scene:
+        return None
+    if args.person and args.scene:
+        raise ConfigError("give either --person (repeated) or --scene FILE, not both")
+    if args.motion is not None or args.body != "builtin" or args.shape is not None:
+        raise ConfigError("--body/--shape/--motion describe a single person; with --person or --scene give each "
+                          "person's body, shape and motion in its spec (BODY:SHAPE:MOTION[@x,z[,yaw[,start]]])")
+    return load_scene_file(Path(args.scene)) if args.scene else [parse_person_spec(p) for p in args.person]
+
+
 def print_synth_summary(summary: dict, body: SkinnedBody) -> None:
-    """What ``synthesize`` wrote, in three lines."""
+    """What ``synthesize`` wrote, in three lines (and one per person of a scene)."""
     depth = summary["person_depth_m"]
-    print(f"wrote {summary['frames']} frames of {summary['motion']} on {summary['body']} "
-          f"(height {body.height:.2f} m) to {summary['out']}")
+    people = summary.get("people")
+    if people:
+        print(f"wrote {summary['frames']} frames of {len(people)} people to {summary['out']}")
+    else:
+        print(f"wrote {summary['frames']} frames of {summary['motion']} on {summary['body']} "
+              f"(height {body.height:.2f} m) to {summary['out']}")
     print("  color/*.png depth/*.png (uint16 mm) intrinsic.json groundtruth.jsonl sequence.json")
     if depth:
-        print(f"  person depth range: {depth[0]:.2f}..{depth[1]:.2f} m")
+        print(f"  {'people' if people else 'person'} depth range: {depth[0]:.2f}..{depth[1]:.2f} m")
+    for person in people or ():
+        print(f"  person {person['id']}: {person['body']} (height {person['height_m']:.2f} m) doing "
+              f"{person['motion']} from x={person['x']:g} m, z={person['z']:g} m, yaw {person['yaw']:g} deg; "
+              f"mean visible share {person['mean_visible']:.2f}")
 
 
 def cmd_body(args: argparse.Namespace) -> int:
@@ -56,13 +92,24 @@ def add_synth_command(sub: argparse._SubParsersAction, common: argparse.Argument
     p = sub.add_parser("synth", parents=[common], formatter_class=DEFAULTS,
                        help="render a synthetic RGBD sequence with ground truth from a body and a motion")
     add_body_options(p)
-    p.add_argument("--motion", required=True, help="a BVH file (CMU, Mixamo or MakeHuman skeleton) or builtin:NAME "
-                                                   "(wave, squat, walk, turn, jumping_jacks)")
+    p.add_argument("--motion", default=None, help="a BVH file (CMU, Mixamo or MakeHuman skeleton) or builtin:NAME "
+                                                  "(wave, squat, walk, turn, jumping_jacks)")
+    p.add_argument("--person", action="append", default=[], metavar="SPEC",
+                   help="a person of a multi-person scene, repeated (ids 1, 2, ... in this order): "
+                        "BODY:SHAPE:MOTION[@x,z[,yaw[,start]]] with BODY builtin, makehuman:DIR or a .glb, SHAPE a "
+                        "preset (empty = default), MOTION a BVH or builtin:NAME, x,z the start on the floor (m; with "
+                        "--camera-yaw 0, x grows to the image's right, z towards the camera), yaw (degrees) turning "
+                        "the motion "
+                        "(+90: walking towards the camera becomes walking to the image's right), start the seconds "
+                        "of the clip skipped; e.g. builtin:female:builtin:walk@1,0,-90")
+    p.add_argument("--scene", default=None, metavar="FILE",
+                   help="a JSON list of people {body, shape, motion, x, z, yaw, start} instead of --person")
     p.add_argument("--frames", type=positive_int, required=True, help="number of frames to write")
     p.add_argument("--out", required=True, help="output folder (created)")
     p.add_argument("--seed", type=int, default=0, help="seed of the depth noise and the simulated detector")
     p.add_argument("--fps", type=float, default=30.0, help="camera frame rate; the motion is resampled to it")
-    p.add_argument("--camera-distance", type=float, default=3.0, help="metres from the subject's start (0.5..8)")
+    p.add_argument("--camera-distance", type=float, default=3.0,
+                   help="metres from the subject's start, or from the centre of the people's starts (0.5..8)")
     p.add_argument("--camera-yaw", type=float, default=0.0, help="degrees around the subject, 0 = in front")
     p.add_argument("--camera-height", type=float, default=1.2, help="lens height above the floor, metres")
     p.add_argument("--skinning", choices=("dqs", "lbs"), default="dqs", help="skinning of the rendered body")

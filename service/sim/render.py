@@ -2,11 +2,14 @@
 
 This renderer is deliberately independent of the OpenCL scorer's rasterizer, so each
 checks the other. Everything is in the camera frame (OpenCV axes, metres); depth is the
-z coordinate of the first hit (0 = no hit), colour a Lambert-shaded RGB image.
+z coordinate of the first hit (0 = no hit), colour a Lambert-shaded RGB image. Several
+people are cast together so they occlude each other; a label image says whose surface
+each pixel shows.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -14,6 +17,16 @@ import numpy as np
 from swarmpose.core.camera import Intrinsics
 
 BODY_ALBEDO = np.array([0.87, 0.68, 0.55])
+PERSON_ALBEDOS = (
+    BODY_ALBEDO,                    # person 1: the single-person colour
+    np.array([0.25, 0.42, 0.78]),   # blue
+    np.array([0.32, 0.64, 0.30]),   # green
+    np.array([0.80, 0.28, 0.26]),   # red
+    np.array([0.58, 0.36, 0.72]),   # violet
+    np.array([0.88, 0.78, 0.25]),   # yellow
+)
+"""Clothing albedos (RGB 0..1) of people 1, 2, ... in a scene, distinct so a 2D network can
+tell them apart; the palette repeats after its last colour."""
 FLOOR_ALBEDO = (np.array([0.55, 0.50, 0.45]), np.array([0.42, 0.38, 0.34]))
 WALL_ALBEDO = np.array([0.72, 0.75, 0.80])
 AMBIENT = 0.3
@@ -49,8 +62,13 @@ class Room:
         return out
 
 
+def person_albedo(index: int) -> np.ndarray:
+    """The albedo (3,) of the person at 0-based ``index`` of a scene (see :data:`PERSON_ALBEDOS`)."""
+    return PERSON_ALBEDOS[index % len(PERSON_ALBEDOS)]
+
+
 class Renderer:
-    """Casts one ray per pixel of ``intrinsics`` at a body mesh plus an optional room."""
+    """Casts one ray per pixel of ``intrinsics`` at one or more body meshes plus an optional room."""
 
     def __init__(self, intrinsics: Intrinsics):
         import open3d as o3d
@@ -72,11 +90,24 @@ class Renderer:
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Depth (H, W) float32 m (0 = nothing hit), colour (H, W, 3) uint8 RGB and the
         body mask (H, W) bool, for one posed mesh: vertices (V, 3) m, triangles (F, 3)."""
+        depth, colour, labels = self.render_people([(vertices, triangles)], room)
+        return depth, colour, labels == 1
+
+    def render_people(self, meshes: Sequence[tuple[np.ndarray, np.ndarray]], room: Room | None = None,
+                      albedos: Sequence[np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Several posed meshes (and the room) in one ray cast, so they occlude each other.
+
+        meshes: per person (vertices (V, 3) m, triangles (F, 3)); albedos: per person an RGB
+        albedo (3,) in 0..1 (default :func:`person_albedo`). Returns depth (H, W) float32 m
+        (0 = nothing hit), colour (H, W, 3) uint8 RGB and labels (H, W) int32: k where person
+        k (1-based, in ``meshes`` order) is the first surface hit, 0 for the room or nothing.
+        """
         o3d = self._o3d
         scene = o3d.t.geometry.RaycastingScene()
-        body_id = scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(vertices, dtype=np.float32)),
-                                      o3d.core.Tensor(np.ascontiguousarray(triangles, dtype=np.uint32)))
-        ids = [body_id]
+        person_ids = [scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(v, dtype=np.float32)),
+                                          o3d.core.Tensor(np.ascontiguousarray(f, dtype=np.uint32)))
+                      for v, f in meshes]
+        ids = []
         if room is not None:
             for verts, tris in room.meshes():
                 ids.append(scene.add_triangles(o3d.core.Tensor(verts.astype(np.float32)), o3d.core.Tensor(tris)))
@@ -86,14 +117,17 @@ class Renderer:
         normals = hit["primitive_normals"].numpy()
         valid = np.isfinite(t)
         depth = np.where(valid, t, 0.0).astype(np.float32)
-        body = valid & (geom == body_id)
+        labels = np.zeros(depth.shape, dtype=np.int32)
 
         shade = AMBIENT + (1 - AMBIENT) * np.abs(np.sum(normals * self._view, axis=-1))
         albedo = np.zeros(depth.shape + (3,))
-        albedo[body] = BODY_ALBEDO
+        for k, geometry in enumerate(person_ids):
+            body = valid & (geom == geometry)
+            labels[body] = k + 1
+            albedo[body] = person_albedo(k) if albedos is None else albedos[k]
         if room is not None:
-            floor = valid & (geom == ids[1])
-            wall = valid & (geom == ids[2])
+            floor = valid & (geom == ids[0])
+            wall = valid & (geom == ids[1])
             albedo[wall] = WALL_ALBEDO
             if np.any(floor):
                 pts = self._dirs[floor] * t[floor, None]
@@ -108,4 +142,13 @@ class Renderer:
                     parity = np.zeros(len(rel))
                 albedo[floor] = np.where(parity[:, None] > 0, FLOOR_ALBEDO[1], FLOOR_ALBEDO[0])
         colour = np.clip(albedo * shade[..., None] * 255.0, 0, 255).astype(np.uint8)
-        return depth, colour, body
+        return depth, colour, labels
+
+    def silhouette(self, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+        """(H, W) bool: the pixels one mesh (vertices (V, 3) m, triangles (F, 3)) covers when
+        nothing else is in the scene."""
+        o3d = self._o3d
+        scene = o3d.t.geometry.RaycastingScene()
+        scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(vertices, dtype=np.float32)),
+                            o3d.core.Tensor(np.ascontiguousarray(triangles, dtype=np.uint32)))
+        return np.isfinite(scene.cast_rays(self._rays)["t_hit"].numpy())

@@ -1,41 +1,58 @@
-"""Synthetic RGBD sequences with ground truth, from a body and a motion (paper §3.1).
+"""Synthetic RGBD sequences with ground truth, from bodies and motions (paper §3.1).
 
 Output folder (Open3D's RGBD layout plus ground truth)::
 
-    color/000000.png ...     RGB render of the body in a room (floor + back wall)
+    color/000000.png ...     RGB render of the people in a room (floor + back wall)
     depth/000000.png ...     uint16 millimetres, 0 = no measurement, Kinect-like noise
     intrinsic.json           Open3D PinholeCameraIntrinsic JSON
     groundtruth.jsonl        one line per frame: frame, timestamp_ns, pose (36-D, camera
                              frame), joints3d (m) and joints2d (px) of the evaluation
-                             joints, detections of the simulated 2D detector
+                             joints, detections of the simulated 2D detector (person 1's);
+                             with several people also ``people``, see below
     sequence.json            how it was made: body, shape, motion, camera, noise, seed
+                             (and ``people``: body, shape, motion, x, z, yaw of each)
+
+One person (:func:`synthesize`, or :func:`synthesize_people` with one person) writes no
+``people`` in ``groundtruth.jsonl``: the file is the single-person format, byte for byte.
+Several people (:func:`synthesize_people`, ids 1..P in the order given) are rendered in
+one ray cast so they occlude each other, each in its own clothing colour; each line keeps
+person 1's top-level fields (old readers see person 1) and adds ``people``: per person
+``id``, ``pose``, ``joints3d``, ``joints2d``, ``detections`` (keypoints hidden by another
+person are missing), ``visible`` (share of the person's silhouette not hidden by others,
+0..1), ``box`` ([x0, y0, x1, y1] px, inclusive, of its visible pixels, or null) and
+``occluded`` (the evaluation joints hidden by another person).
 
 World frame while placing things: X = the subject's left at the first frame, Y = up,
 Z = forward, floor at y = 0. The camera stands ``camera_distance`` in front of the
-subject's start position, turned ``camera_yaw`` about the vertical, its lens
-``camera_height`` above the floor, looking at the middle of the body.
+people's start positions' centre, turned ``camera_yaw`` about the vertical, its lens
+``camera_height`` above the floor, looking at the middle of the bodies (see
+:mod:`swarmpose.sim.scene`).
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from swarmpose.body.kinematics import matrix_to_quaternion, transform_points
-from swarmpose.body.skeleton import EVAL_JOINTS, LAYOUTS, POSE_DIM
+from swarmpose.body.kinematics import transform_points
+from swarmpose.body.skeleton import EVAL_JOINTS, LAYOUTS
 from swarmpose.body.skinned import SkinnedBody
-from swarmpose.core.camera import Intrinsics, look_at
+from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError, OutputError
 from swarmpose.core.progress import progress_bar
 from swarmpose.detect.simulated import SimulatedNoise, person_size, simulate_detections
 from swarmpose.motion.sequence import Motion
 from swarmpose.sim.depth_noise import KinectNoise
 from swarmpose.sim.render import Renderer, Room
+from swarmpose.sim.scene import PersonSpec, SceneFilming, ScenePerson, check_scene, place_in_world, place_people
 
-WALL_BEHIND_SUBJECT = 2.0
+OCCLUSION_MARGIN = 0.05
+"""A point counts as hidden by another person when that person's surface at the point's pixel
+lies more than this (m) in front of it."""
 
 
 @dataclass(frozen=True)
@@ -84,32 +101,49 @@ class Filming:
 
 def place_camera(body: SkinnedBody, motion: Motion, config: SynthConfig) -> Filming:
     """Stand the body on the floor, put the camera in front of it, express poses in its frame."""
-    n = min(len(motion), config.frames)
-    root = np.array([0.0, body.floor_offset, 0.0]) + motion.root_offset[:n]
-    rot = motion.root_rotation[:n]
-    world = np.zeros((n, POSE_DIM))
-    world[:, 0:3] = root
-    world[:, 3:7] = matrix_to_quaternion(rot)
-    world[:, 7:] = motion.angles[:n]
-    lowest = min(float(body.pose(world[i:i + 64], config.skinning)[..., 1].min()) for i in range(0, n, 64))
-    world[:, 1] -= lowest  # the lowest sole of the whole sequence touches the floor
+    film = place_scene([ScenePerson(PersonSpec(), body, motion)], config)
+    return Filming(film.poses[0], film.rotation, film.eye, film.room)
 
-    start = world[0, 0:3]
-    yaw = np.radians(config.camera_yaw_deg)
-    eye = np.array([start[0] + config.camera_distance * np.sin(yaw), config.camera_height,
-                    start[2] + config.camera_distance * np.cos(yaw)])
-    target = np.array([start[0], 0.5 * body.height, start[2]])
-    r_cw = look_at(eye, target)
-    cam = world.copy()
-    cam[:, 0:3] = (world[:, 0:3] - eye) @ r_cw.T
-    cam[:, 3:7] = matrix_to_quaternion(r_cw @ rot)
-    ahead = target - eye
-    ahead[1] = 0.0
-    ahead /= np.linalg.norm(ahead)
-    wall = eye + ahead * (config.camera_distance + WALL_BEHIND_SUBJECT)
-    room = Room(floor_point=r_cw @ (np.zeros(3) - eye), floor_normal=r_cw @ np.array([0.0, 1.0, 0.0]),
-                wall_point=r_cw @ (wall - eye), wall_normal=r_cw @ -ahead)
-    return Filming(cam, r_cw, eye, room)
+
+def place_scene(people: Sequence[ScenePerson], config: SynthConfig) -> SceneFilming:
+    """Stand every person at its start on the floor, put the camera in front of them, express
+    their poses in its frame."""
+    placed = [place_in_world(p.body, p.motion, config.frames, p.spec.x, p.spec.z, p.spec.yaw_deg, config.skinning)
+              for p in people]
+    return place_people(placed, config.camera_distance, config.camera_yaw_deg, config.camera_height)
+
+
+def occluded_points(points3d: np.ndarray, points2d: np.ndarray, depth: np.ndarray, labels: np.ndarray,
+                    person: int, margin: float = OCCLUSION_MARGIN) -> np.ndarray:
+    """(N,) bool: points hidden by *another* person.
+
+    points3d (N, 3) camera frame m and points2d (N, 2) px of person ``person`` (1-based id);
+    depth (H, W) m and labels (H, W) (0 = nobody, k = person k) of the noise-free render. A
+    point is hidden when its nearest pixel shows another person whose surface lies more than
+    ``margin`` m in front of it; points outside the image or behind the camera are not (the
+    detector drops those anyway), nor are points behind the person's own body.
+    """
+    h, w = labels.shape
+    uv = np.round(np.nan_to_num(points2d, nan=-1.0, posinf=-1.0, neginf=-1.0)).astype(np.int64)
+    inside = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h) & (points3d[:, 2] > 0)
+    out = np.zeros(len(points3d), dtype=bool)
+    u, v = uv[inside, 0], uv[inside, 1]
+    who = labels[v, u]
+    out[inside] = (who != 0) & (who != person) & (depth[v, u] < points3d[inside, 2] - margin)
+    return out
+
+
+def visible_share(labels: np.ndarray, person: int, silhouette: np.ndarray) -> tuple[float, list[int] | None]:
+    """(share of ``silhouette`` (H, W) bool, the person's pixels alone, that ``labels`` still
+    gives to ``person``; [x0, y0, x1, y1] px, inclusive, of those visible pixels or None)."""
+    own = labels == person
+    total = int(np.count_nonzero(silhouette))
+    seen = int(np.count_nonzero(own & silhouette))
+    if seen == 0:
+        return 0.0, None
+    rows = np.flatnonzero(np.any(own, axis=1))
+    cols = np.flatnonzero(np.any(own, axis=0))
+    return seen / total, [int(cols[0]), int(rows[0]), int(cols[-1]), int(rows[-1])]
 
 
 def _prepare_output(out: Path) -> None:
@@ -130,61 +164,115 @@ def synthesize(body: SkinnedBody, motion: Motion, out: Path, config: SynthConfig
 
     Returns a summary: frames written, the person's depth range (m) and paths.
     """
+    return _render(out, [ScenePerson(PersonSpec(), body, motion)], config, description, progress, scene=False)
+
+
+def synthesize_people(people: Sequence[ScenePerson], out: Path, config: SynthConfig = SynthConfig(),
+                      description: dict | None = None, progress: bool = True) -> dict:
+    """Render ``config.frames`` frames of several people (ids 1..P in this order) into ``out``.
+
+    Each person's spec places it (start x, z and yaw); ``sequence.json`` lists them. Returns
+    a summary: frames written, the people's depth range (m), per person its id, body, height
+    (m), motion, start x, z (m), yaw (degrees) and mean visible share.
+    """
+    check_scene([p.spec for p in people])
+    return _render(out, list(people), config, description, progress, scene=True)
+
+
+def _render(out: Path, people: list[ScenePerson], config: SynthConfig, description: dict | None,
+            progress: bool, scene: bool) -> dict:
     import cv2
 
     config.validate()
-    if len(motion) < config.frames:
-        raise ConfigError(f"motion {motion.name!r} has {len(motion)} frames at {motion.fps:g} fps; "
-                          f"ask for --frames {len(motion)} or fewer")
+    for k, p in enumerate(people, 1):
+        if len(p.motion) < config.frames:
+            who = f"person {k}: " if len(people) > 1 else ""
+            raise ConfigError(f"{who}motion {p.motion.name!r} has {len(p.motion)} frames at {p.motion.fps:g} fps; "
+                              f"ask for --frames {len(p.motion)} or fewer")
     out = Path(out)
     _prepare_output(out)
-    film = place_camera(body, motion, config)
+    film = place_scene(people, config)
     intr = config.intrinsics
     renderer = Renderer(intr)
     layout = LAYOUTS[config.layout]
     intr.save(out / "intrinsic.json")
+    first = people[0]
     meta = {
         "schema": "swarmpose.sequence", "version": 1, "frames": config.frames, "fps": config.fps,
-        "seed": config.seed, "body": body.name, "motion": motion.name, "skinning": config.skinning,
+        "seed": config.seed, "body": first.body.name, "motion": first.motion.name, "skinning": config.skinning,
         "camera": {"distance_m": config.camera_distance, "yaw_deg": config.camera_yaw_deg,
                    "height_m": config.camera_height, "world_to_camera_rotation": film.rotation.tolist(),
                    "eye_world_m": film.eye.tolist()},
         "depth_noise": config.noise.as_dict(), "detector": {"layout": layout.name, **config.detector.as_dict()},
         **(description or {}),
     }
+    if scene:
+        meta["people"] = [{"id": k, **p.spec.as_dict(), "body_name": p.body.name, "motion_name": p.motion.name,
+                           "height_m": round(p.body.height, 4)} for k, p in enumerate(people, 1)]
     (out / "sequence.json").write_text(json.dumps(meta, indent=2))
 
-    by_name = {p: k for k, p in enumerate(body.point_names)}
-    person_depth = [np.inf, -np.inf]
+    several = len(people) > 1
+    depth_range = [np.inf, -np.inf]
+    visible_sum = np.zeros(len(people))
     with open(out / "groundtruth.jsonl", "w", encoding="utf-8") as gt, \
             progress_bar("synth", config.frames, enabled=progress) as bar:
         for i in range(config.frames):
-            h = film.poses[i:i + 1]
-            transforms = body.transforms(h)
-            verts = body.skin(transforms, config.skinning)[0]
-            depth, colour, mask = renderer.render(verts, body.triangles, film.room)
+            transforms = [p.body.transforms(film.poses[k][i:i + 1]) for k, p in enumerate(people)]
+            meshes = [(p.body.skin(t, config.skinning)[0], p.body.triangles) for p, t in zip(people, transforms)]
+            depth, colour, labels = renderer.render_people(meshes, film.room)
             noisy = config.noise.apply(depth, np.random.default_rng([config.seed, i, 1]))
-            seen = noisy[mask & (noisy > 0)]
+            seen = noisy[(labels > 0) & (noisy > 0)]
             if seen.size:
-                person_depth = [min(person_depth[0], float(seen.min())), max(person_depth[1], float(seen.max()))]
+                depth_range = [min(depth_range[0], float(seen.min())), max(depth_range[1], float(seen.max()))]
             name = f"{i:06d}.png"
             cv2.imwrite(str(out / "color" / name), cv2.cvtColor(colour, cv2.COLOR_RGB2BGR))
             cv2.imwrite(str(out / "depth" / name), np.round(noisy * 1000.0).astype(np.uint16))
-            pts3 = transform_points(body.point_bones, body.point_rest, transforms)[0]
-            pts2 = intr.project(pts3)
-            det = simulate_detections(
-                layout, {p: pts2[k] for p, k in by_name.items()}, {p: bool(pts3[k, 2] > 0) for p, k in by_name.items()},
-                person_size(pts2), intr, config.detector, config.seed, i)
-            record = {
-                "frame": i, "timestamp_ns": int(round(i * 1e9 / config.fps)), "pose": h[0].tolist(),
-                "joints3d": {j: pts3[by_name[j]].round(6).tolist() for j in EVAL_JOINTS},
-                "joints2d": {j: pts2[by_name[j]].round(3).tolist() for j in EVAL_JOINTS},
-                "detections": {"layout": layout.name, "keypoints": det},
-            }
+            truths = []
+            for k, (p, t) in enumerate(zip(people, transforms)):
+                truth = _person_truth(p.body, film.poses[k][i], t, k, i, depth, labels, intr, layout, config, several)
+                if several:
+                    truth["visible"], truth["box"] = visible_share(labels, k + 1, renderer.silhouette(*meshes[k]))
+                    visible_sum[k] += truth["visible"]
+                    truth["visible"] = round(truth["visible"], 4)
+                truths.append(truth)
+            record = {"frame": i, "timestamp_ns": int(round(i * 1e9 / config.fps)),
+                      **{key: truths[0][key] for key in ("pose", "joints3d", "joints2d", "detections")}}
+            if several:
+                record["people"] = [{"id": k, **truth} for k, truth in enumerate(truths, 1)]
             gt.write(json.dumps(record, allow_nan=False) + "\n")
             gt.flush()
             bar.update(1)
-    return {"out": str(out), "frames": config.frames, "body": body.name, "motion": motion.name,
-            "person_depth_m": person_depth if np.isfinite(person_depth[0]) else None,
-            "config": {k: v for k, v in asdict(config).items() if k in ("fps", "seed", "camera_distance",
-                                                                          "camera_yaw_deg", "camera_height")}}
+    summary = {"out": str(out), "frames": config.frames, "body": first.body.name, "motion": first.motion.name,
+               "person_depth_m": depth_range if np.isfinite(depth_range[0]) else None,
+               "config": {k: v for k, v in asdict(config).items() if k in ("fps", "seed", "camera_distance",
+                                                                             "camera_yaw_deg", "camera_height")}}
+    if scene:
+        summary["people"] = [{"id": k, "body": p.body.name, "height_m": p.body.height, "motion": p.motion.name,
+                              "x": p.spec.x, "z": p.spec.z, "yaw": p.spec.yaw_deg,
+                              "mean_visible": round(float(visible_sum[k - 1] / config.frames), 3) if several else 1.0}
+                             for k, p in enumerate(people, 1)]
+    return summary
+
+
+def _person_truth(body: SkinnedBody, pose: np.ndarray, transforms: np.ndarray, index: int, frame: int,
+                  depth: np.ndarray, labels: np.ndarray, intr: Intrinsics, layout, config: SynthConfig,
+                  several: bool) -> dict:
+    """One person's ground truth of one frame: pose, evaluation joints 3D / 2D, simulated
+    detections (points hidden by another person missing) and, with several people, the
+    evaluation joints so hidden."""
+    by_name = {p: k for k, p in enumerate(body.point_names)}
+    pts3 = transform_points(body.point_bones, body.point_rest, transforms)[0]
+    pts2 = intr.project(pts3)
+    hidden = occluded_points(pts3, pts2, depth, labels, index + 1) if several else np.zeros(len(pts3), bool)
+    depth_ok = {p: bool(pts3[k, 2] > 0) and not hidden[k] for p, k in by_name.items()}
+    det = simulate_detections(layout, {p: pts2[k] for p, k in by_name.items()}, depth_ok, person_size(pts2),
+                              intr, config.detector, config.seed, frame, stream=index)
+    truth = {
+        "pose": pose.tolist(),
+        "joints3d": {j: pts3[by_name[j]].round(6).tolist() for j in EVAL_JOINTS},
+        "joints2d": {j: pts2[by_name[j]].round(3).tolist() for j in EVAL_JOINTS},
+        "detections": {"layout": layout.name, "keypoints": det},
+    }
+    if several:
+        truth["occluded"] = [j for j in EVAL_JOINTS if hidden[by_name[j]]]
+    return truth
