@@ -8,8 +8,10 @@ a run that dies leaves files holding every frame written so far:
 * :class:`CsvSink` — one row per frame and body (:data:`CSV_COLUMNS`): metres in the camera
   frame (OpenCV: x right, y down, z forward), pixels, the 36-D pose; empty cells where a
   value is unknown;
-* :class:`BvhSink` — the animation of the tracking body's bone rig, centimetres, Y up;
-* :class:`~swarmpose.publish.overlay.OverlaySink` — the skeleton drawn over the video.
+* :class:`BvhSink` — one body id's animation of the tracking body's bone rig, centimetres,
+  Y up; :class:`PerIdBvhSink` keeps one per id: ``poses.bvh`` for id 0, ``poses_id<N>.bvh``
+  for id N, created when N first appears;
+* :class:`~swarmpose.publish.overlay.OverlaySink` — every body's skeleton drawn over the video.
 
 :func:`open_recording` opens all of them in one folder. A file that cannot be created or
 written raises :class:`~swarmpose.core.errors.OutputError` naming it.
@@ -183,8 +185,22 @@ def _numbers(values) -> str:
     return " ".join(f"{round(float(v), 6) + 0.0:.6f}" for v in values)  # + 0.0 turns -0.0 into 0.0
 
 
+def bvh_path(out_dir: str | Path, body_id: int) -> Path:
+    """The BVH file of body id ``body_id`` in ``out_dir``: ``poses.bvh`` for id 0 (what a run of
+    one person writes), ``poses_id<N>.bvh`` for id N."""
+    return Path(out_dir) / ("poses.bvh" if body_id == 0 else f"poses_id{body_id}.bvh")
+
+
+def _check_id(body_id, what: str) -> int:
+    """``body_id`` as an int; OutputError naming ``what`` unless it is an integer >= 0."""
+    if isinstance(body_id, bool) or not isinstance(body_id, (int, np.integer)) or body_id < 0:
+        raise OutputError(f"{what}: body id {body_id!r} is not an integer >= 0, so it names no BVH file; "
+                          "give every body a track id as protocol/frame.schema.json says")
+    return int(body_id)
+
+
 class BvhSink(_FileSink):
-    """``poses.bvh``: the first body's pose per frame as an animation of ``body``'s bone rig.
+    """A BVH file of one body id's pose per frame as an animation of ``body``'s bone rig.
 
     Units centimetres; world frame Y up (the camera frame turned 180 degrees about x, so
     x right, y up, z towards the camera). ROOT = bone 0 with position and ZXY rotation
@@ -192,17 +208,19 @@ class BvhSink(_FileSink):
     bone heads relative to the parent's (the root's is zero: its position channels place
     it), leaf bones end in an End Site along the bone. Each bone's rotation is its delta
     from the rest pose, so all angles zero is the body's rest pose standing upright.
-    One MOTION row per frame message; a frame without a pose (no body, pose null) repeats
-    the last row, or before any pose shows the rest pose upright at the origin. Frame
+    One MOTION row per frame message, from the body of that message whose ``id`` is
+    ``body_id`` (the first such); a frame without its pose (no body of that id, pose null)
+    repeats the last row, or before any pose shows the rest pose upright at the origin. Frame
     Time is ``1 / fps``. The ``Frames:`` count is rewritten in place after every row, so the
     file is a complete BVH after every frame.
     """
 
     what = "the BVH file"
 
-    def __init__(self, path: str | Path, body: SkinnedBody, fps: float = 30.0) -> None:
+    def __init__(self, path: str | Path, body: SkinnedBody, fps: float = 30.0, body_id: int = 0) -> None:
         if not (np.isfinite(fps) and fps > 0):
             raise OutputError(f"BVH file {path}: fps must be positive, got {fps}")
+        self.body_id = _check_id(body_id, f"BVH file {path}")
         super().__init__(path, "wb")
         self.body = body
         self.rig = body.rig
@@ -270,8 +288,8 @@ class BvhSink(_FileSink):
         return np.concatenate([BVH_UNITS_PER_M * CAMERA_TO_BVH @ pos[0], euler.ravel()])
 
     def _row(self, message: dict) -> str:
-        bodies = message.get("bodies") or []
-        pose = bodies[0].get("pose") if bodies else None
+        mine = [b for b in message.get("bodies") or [] if b.get("id") == self.body_id]
+        pose = mine[0].get("pose") if mine else None
         if pose is not None:
             try:
                 return _numbers(self.channels(np.asarray(pose, dtype=np.float64)))
@@ -297,9 +315,72 @@ class BvhSink(_FileSink):
         self.frames += 1
 
 
+class PerIdBvhSink:
+    """One :class:`BvhSink` per body id in folder ``out_dir``, all animating ``body`` at ``fps``.
+
+    Id 0's file, ``poses.bvh``, is created at once and has a row for every frame message (as
+    a run of one person always had); id N's, ``poses_id<N>.bvh``, is created by the first
+    message that holds a body with id N and has a row for that message and every later one.
+    Each file repeats its last row on frames where its id is absent or has no pose, and is a
+    complete BVH after every frame. Every id seen keeps its file open and gets a row per
+    frame until :meth:`close`. A body whose id is not an integer >= 0 raises
+    :class:`~swarmpose.core.errors.OutputError`, as does a file that cannot be written.
+    """
+
+    what = "the BVH files"
+
+    def __init__(self, out_dir: str | Path, body: SkinnedBody, fps: float = 30.0) -> None:
+        self.out_dir = Path(out_dir)
+        self.body = body
+        self.fps = fps
+        self.frames = 0
+        self._closed = False
+        self.sinks: dict[int, BvhSink] = {0: BvhSink(bvh_path(self.out_dir, 0), body, fps, body_id=0)}
+
+    @property
+    def path(self) -> Path:
+        """``poses.bvh``, the file of id 0."""
+        return self.sinks[0].path
+
+    @property
+    def paths(self) -> list[Path]:
+        """Every BVH file created so far, by id."""
+        return [self.sinks[k].path for k in sorted(self.sinks)]
+
+    def frame(self, message: dict, frame: Frame | None = None) -> None:
+        """Open the files of ids first seen in ``message``, then append one row to every file."""
+        if self._closed:
+            raise OutputError(f"{self.what} in {self.out_dir} are closed; open a new sink to write more frames")
+        for body in message.get("bodies") or []:
+            body_id = _check_id(body.get("id"), f"frame {message.get('frame', '?')}")
+            if body_id not in self.sinks:
+                self.sinks[body_id] = BvhSink(bvh_path(self.out_dir, body_id), self.body, self.fps, body_id)
+        for sink in self.sinks.values():
+            sink.frame(message, frame)
+        self.frames += 1
+
+    def status(self, message: dict) -> None:
+        """Status messages are not recorded."""
+
+    def close(self) -> None:
+        """Close every file (idempotent); the first error, if any, is raised after all are closed."""
+        if self._closed:
+            return
+        self._closed = True
+        error: OutputError | None = None
+        for sink in self.sinks.values():
+            try:
+                sink.close()
+            except OutputError as exc:
+                error = error or exc
+        if error is not None:
+            raise error
+
+
 def open_recording(out_dir: str | Path, body: SkinnedBody, fps: float = 30.0, overlay: bool = True) -> list[Sink]:
     """The replay sinks of folder ``out_dir`` (created if needed): poses.jsonl, poses.csv,
-    poses.bvh (animating ``body`` at ``fps``) and, with ``overlay``, overlay.mp4."""
+    the BVH files (:class:`PerIdBvhSink`: poses.bvh for id 0, poses_id<N>.bvh for id N,
+    animating ``body`` at ``fps``) and, with ``overlay``, overlay.mp4."""
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -307,7 +388,7 @@ def open_recording(out_dir: str | Path, body: SkinnedBody, fps: float = 30.0, ov
         raise OutputError(f"cannot create the output folder {out}: {exc.strerror or exc}; "
                           "choose a writable output folder (or remove the file in its way)") from exc
     makers = [lambda: JsonlSink(out / "poses.jsonl"), lambda: CsvSink(out / "poses.csv"),
-              lambda: BvhSink(out / "poses.bvh", body, fps)]
+              lambda: PerIdBvhSink(out, body, fps)]
     if overlay:
         makers.append(lambda: OverlaySink(out / "overlay.mp4", fps))
     sinks: list[Sink] = []

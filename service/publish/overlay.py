@@ -1,12 +1,19 @@
-"""The overlay video: the tracked skeleton drawn over the colour frames, as an MP4.
+"""The overlay video: the tracked skeletons drawn over the colour frames, as an MP4.
 
-:class:`OverlaySink` draws, per frame message, the links of
-:data:`~swarmpose.body.skeleton.EVAL_LINKS` and a dot per evaluation joint (at the joint's
-``pixel``, coloured by its confidence: green = 1 .. red = 0) of the message's first body
-over the colour image (a turbo colour map of the depth where the frame has no colour),
-plus a line of text: frame number, state, latency and the reason, if any. A skipped frame
-(no :class:`~swarmpose.sources.base.Frame`) repeats the previous image with the reason
-written on it.
+:class:`OverlaySink` draws, per frame message, every body with :func:`draw_bodies` over the
+colour image (a turbo colour map of the depth where the frame has no colour), plus a line
+of text (:func:`caption`). Every body is drawn as the links of
+:data:`~swarmpose.body.skeleton.EVAL_LINKS` and a dot per evaluation joint at the joint's
+``pixel``:
+
+* one body: white links and dots coloured by confidence (green = 1 .. red = 0); caption
+  ``frame N  state  latency ms  reason``;
+* several bodies: links and dots in the body's id colour (:func:`id_color`, a fixed
+  palette indexed by id, unlike the confidence colours and each other) and its id written
+  beside its head; caption ``frame N  K people  latency ms``.
+
+A skipped frame (no :class:`~swarmpose.sources.base.Frame`) repeats the previous image with
+the reason written on it.
 
 The MP4 is fragmented, one fragment per frame, and flushed after every frame, so a file
 whose writer was killed still plays up to its last frame but one. Codec: H.264 (libx264,
@@ -31,6 +38,21 @@ DEPTH_RANGE_M = (0.3, 6.0)
 """Depth (m) mapped onto the colour map's ends when a frame has no colour image."""
 LINK_COLOR = (255, 255, 255)
 TEXT_COLOR = (255, 255, 255)
+ID_PALETTE: tuple[tuple[int, int, int], ...] = (
+    (0, 114, 255),    # azure
+    (255, 0, 255),    # magenta
+    (0, 255, 255),    # cyan
+    (255, 150, 200),  # pink
+    (150, 80, 255),   # violet
+    (0, 150, 130),    # teal
+    (150, 80, 30),    # brown
+    (120, 0, 140),    # purple
+)
+"""RGB of body ids 0, 1, 2, ... when several bodies are drawn (id modulo its length). Every pair is
+more than 120 apart in RGB (Euclidean, 0..255 per channel), and each is more than 100 from every
+confidence colour and from the white links and text and black."""
+LABEL_JOINTS = ("head", "neck")
+"""Joints beside which a body's id is written, the first one with a pixel."""
 
 
 def video_codec() -> str:
@@ -75,38 +97,127 @@ def _text(image: np.ndarray, text: str) -> None:
     cv2.putText(image, text, (5, height + 4), cv2.FONT_HERSHEY_SIMPLEX, scale, TEXT_COLOR, 1, cv2.LINE_AA)
 
 
-def draw_skeleton(image: np.ndarray, body: dict, scale: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
-    """Draw one body entry of a frame message onto ``image`` (H, W, 3) uint8 RGB, in place.
-
-    Joint pixels (px of the colour image) are multiplied by ``scale`` (sx, sy); joints
-    without a pixel are left out, and so are the links that touch them.
-    """
-    import cv2
-
-    size = min(image.shape[:2])
-    thickness, radius = max(2, round(size / 240)), max(3, round(size / 100))
+def _pixels(body: dict, scale: tuple[float, float]) -> dict[str, tuple[int, int]]:
+    """The drawable joint pixels of one body entry, times ``scale``: name -> (x, y) px."""
     joints = body.get("joints") or {}
     points: dict[str, tuple[int, int]] = {}
     for name in EVAL_JOINTS:
         pixel = (joints.get(name) or {}).get("pixel")
         if pixel is not None and all(np.isfinite(pixel)) and max(abs(pixel[0]), abs(pixel[1])) < 1e5:
             points[name] = (int(round(pixel[0] * scale[0])), int(round(pixel[1] * scale[1])))
+    return points
+
+
+def _sizes(image: np.ndarray) -> tuple[int, int]:
+    """Line thickness and dot radius (px) for an image of this size."""
+    size = min(image.shape[:2])
+    return max(2, round(size / 240)), max(3, round(size / 100))
+
+
+def draw_skeleton(image: np.ndarray, body: dict, scale: tuple[float, float] = (1.0, 1.0),
+                  color: tuple[int, int, int] | None = None) -> np.ndarray:
+    """Draw one body entry of a frame message onto ``image`` (H, W, 3) uint8 RGB, in place.
+
+    Joint pixels (px of the colour image) are multiplied by ``scale`` (sx, sy); joints
+    without a pixel are left out, and so are the links that touch them. ``color`` None:
+    white links and dots coloured by confidence; an RGB colour: links and dots in it (the
+    dots ringed in black).
+    """
+    import cv2
+
+    thickness, radius = _sizes(image)
+    joints = body.get("joints") or {}
+    points = _pixels(body, scale)
     for a, b in EVAL_LINKS:
         if a in points and b in points:
-            cv2.line(image, points[a], points[b], LINK_COLOR, thickness, cv2.LINE_AA)
+            cv2.line(image, points[a], points[b], LINK_COLOR if color is None else color, thickness, cv2.LINE_AA)
     for name, point in points.items():
-        cv2.circle(image, point, radius, confidence_color(joints[name].get("confidence", 0.0)), -1, cv2.LINE_AA)
+        if color is None:
+            cv2.circle(image, point, radius, confidence_color(joints[name].get("confidence", 0.0)), -1, cv2.LINE_AA)
+        else:
+            cv2.circle(image, point, radius + 1, (0, 0, 0), -1, cv2.LINE_AA)
+            cv2.circle(image, point, radius, color, -1, cv2.LINE_AA)
+    return image
+
+
+def id_color(body_id: int) -> tuple[int, int, int]:
+    """RGB of body ``body_id`` (>= 0) in the overlay: :data:`ID_PALETTE` indexed by id, cycling."""
+    return ID_PALETTE[int(body_id) % len(ID_PALETTE)]
+
+
+def label_anchor(body: dict, scale: tuple[float, float] = (1.0, 1.0)) -> tuple[int, int] | None:
+    """Where a body's id is written (x, y) px: its head joint, else its neck, else its highest
+    drawn joint; None when no joint has a pixel."""
+    points = _pixels(body, scale)
+    for name in LABEL_JOINTS:
+        if name in points:
+            return points[name]
+    return min(points.values(), key=lambda p: p[1]) if points else None
+
+
+def _label(image: np.ndarray, text: str, anchor: tuple[int, int], color: tuple[int, int, int]) -> None:
+    """``text`` in ``color`` with a 2 px black outline, up and right of ``anchor`` (x, y) px, in place.
+
+    The outline is the text's mask dilated (OpenCV draws Hershey text no thicker than 2 px)."""
+    import cv2
+
+    _, radius = _sizes(image)
+    font, scale = cv2.FONT_HERSHEY_SIMPLEX, max(0.5, min(image.shape[:2]) / 600)
+    (width, height), base = cv2.getTextSize(text, font, scale, 2)
+    rows, cols = image.shape[:2]
+    x = int(np.clip(anchor[0] + radius + 2, 0, max(0, cols - width)))
+    y = int(np.clip(anchor[1] - radius - 2, height + 2, max(height + 2, rows - base - 2)))
+    x0, y0, x1, y1 = max(x - 4, 0), max(y - height - 4, 0), min(x + width + 4, cols), min(y + base + 4, rows)
+    if x0 >= x1 or y0 >= y1:
+        return
+    mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
+    cv2.putText(mask, text, (x - x0, y - y0), font, scale, 255, 2, cv2.LINE_AA)
+    outline = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
+    roi = image[y0:y1, x0:x1].astype(np.float32) * (1 - outline[..., None] / 255.0)
+    alpha = mask[..., None] / 255.0
+    image[y0:y1, x0:x1] = np.round(roi * (1 - alpha) + np.asarray(color, np.float32) * alpha).astype(np.uint8)
+
+
+def draw_bodies(image: np.ndarray, bodies: list[dict], scale: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
+    """Draw every body entry of a frame message onto ``image`` (H, W, 3) uint8 RGB, in place.
+
+    ``bodies``: the message's ``bodies`` list; joint pixels (px) are multiplied by ``scale``
+    (sx, sy). One body: white links, confidence-coloured dots (:func:`draw_skeleton`).
+    Several: each in its id colour (:func:`id_color`) with its id written beside its head
+    (:func:`label_anchor`); a body without any joint pixel draws nothing.
+    """
+    if len(bodies) == 1:
+        return draw_skeleton(image, bodies[0], scale)
+    for k, body in enumerate(bodies):
+        body_id = body.get("id")
+        if isinstance(body_id, bool) or not isinstance(body_id, (int, np.integer)) or body_id < 0:
+            body_id = k  # not a protocol id: colour it by its place in the list
+        color = id_color(body_id)
+        draw_skeleton(image, body, scale, color)
+        anchor = label_anchor(body, scale)
+        if anchor is not None:
+            _label(image, str(body_id), anchor, color)
     return image
 
 
 def caption(message: dict, skipped: bool = False) -> str:
-    """The text line of a frame: ``frame N  state  latency ms  reason`` (state ``no body`` for a
-    frame without bodies); ``frame N  skipped  reason`` for one the source could not deliver."""
+    """The text line of a frame: ``frame N  state  latency ms  reason`` for one body (state
+    ``no body`` for a frame without bodies; ``person K`` after the state when its id K is not
+    0), ``frame N  K people  latency ms  reason`` for several (``K people (L lost)`` when L of
+    them are lost); ``frame N  skipped  reason`` for one the source could not deliver."""
     bodies = message.get("bodies") or []
-    reason = (bodies[0].get("reason") if bodies else "") or message.get("reason", "")
+    several = len(bodies) > 1
+    reason = (bodies[0].get("reason") if bodies and not several else "") or message.get("reason", "")
     if skipped:
         return f"frame {message.get('frame', '?')}  skipped" + (f"  {reason}" if reason else "")
-    state = bodies[0].get("state", "") if bodies else "no body"
+    if several:
+        lost = sum(body.get("state") == "lost" for body in bodies)
+        state = f"{len(bodies)} people" + (f" ({lost} lost)" if lost else "")
+    elif bodies:
+        body_id = bodies[0].get("id", 0)
+        state = bodies[0].get("state", "") + (f"  person {body_id}" if body_id != 0 else "")
+    else:
+        state = "no body"
     parts = [f"frame {message.get('frame', '?')}", state, f"{float(message.get('latency_ms', 0.0)):.1f} ms"]
     return "  ".join(parts + ([reason] if reason else []))
 
@@ -192,9 +303,7 @@ class OverlaySink:
             else:  # the source changed size mid-stream: fit it to the video
                 image = cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)
                 scale = (w / width, h / height)
-            bodies = message.get("bodies") or []
-            if bodies:
-                draw_skeleton(image, bodies[0], scale)
+            draw_bodies(image, message.get("bodies") or [], scale)
             self._last = image.copy()
         _text(image, caption(message, skipped=frame is None))
         self._encode(image)

@@ -1,9 +1,10 @@
-"""The replay files: poses.jsonl, poses.csv, poses.bvh and open_recording.
+"""The replay files: poses.jsonl, poses.csv, the BVH files (one per body id) and open_recording.
 
 Oracles: JSON and CSV are read back with the stdlib readers and compared with the messages;
 the BVH is read back with the third-party ``bvhio`` and with ``swarmpose.motion.bvh`` and its
-joint positions compared with the bone heads of ``forward_kinematics`` turned Y up
-(x 100 cm, y and z negated).
+root channels and joint positions compared with the messages' poses and the bone heads of
+``forward_kinematics`` turned Y up (x 100 cm, y and z negated). Which rows each id's file
+must hold is worked out by hand from a scripted scene of several people.
 """
 
 from __future__ import annotations
@@ -11,7 +12,6 @@ from __future__ import annotations
 import csv
 import json
 import re
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -22,29 +22,27 @@ from swarmpose.body.kinematics import forward_kinematics, matrix_to_quaternion
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import ANGLE_LIMITS, EVAL_JOINTS
 from swarmpose.core.errors import OutputError
-from swarmpose.messages import POSE_NAMES, frame_message, validate
+from swarmpose.messages import POSE_NAMES, body_message, frame_message, validate
 from swarmpose.motion.builtin import builtin_motion
 from swarmpose.motion.bvh import read_bvh
-from swarmpose.publish.files import BvhSink, CsvSink, JsonlSink, open_recording
+from swarmpose.publish.files import UPRIGHT, BvhSink, CsvSink, JsonlSink, PerIdBvhSink, open_recording
 from swarmpose.publish.overlay import OverlaySink
 from swarmpose.sim.synth import SynthConfig, place_camera
-from swarmpose.tracking.result import BodyResult
 
 TO_BVH = np.array([100.0, -100.0, -100.0])  # camera frame m -> BVH world cm (Y up)
 
 
-def result(seed: int, pose: np.ndarray | None = None, state: str = "tracking", reason: str = "",
-           unknown: tuple[int, ...] = ()) -> BodyResult:
-    """A BodyResult with random joints; joints listed in ``unknown`` are NaN (null in the message)."""
+def entry(seed: int, pose: np.ndarray | None = None, state: str = "tracking", reason: str = "",
+          unknown: tuple[int, ...] = (), body_id: int = 0) -> dict:
+    """One body of a frame message (``body_message``) with random joints; joints listed in
+    ``unknown`` are NaN (null in the message)."""
     rng = np.random.default_rng(seed)
     joints3d = rng.uniform(-1, 1, (14, 3)) + [0, 0, 3]
     joints2d = rng.uniform(0, 640, (14, 2))
     joints3d[list(unknown)] = np.nan
     joints2d[list(unknown)] = np.nan
-    return BodyResult(id=0, state=state, reason=reason,
-                       pose=None if pose is None else np.asarray(pose, dtype=float),
-                       joints3d=joints3d, joints2d=joints2d, confidence=rng.uniform(0, 1, 14),
-                       objective={"E": float(rng.uniform(0, 5)), "E_D": 1.0}, timings_ms={})
+    return body_message(body_id, state, reason, None if pose is None else np.asarray(pose, dtype=float),
+                        joints3d, joints2d, rng.uniform(0, 1, 14), {"E": float(rng.uniform(0, 5)), "E_D": 1.0})
 
 
 def message(index: int, bodies: list[dict], reason: str = "") -> dict:
@@ -56,18 +54,13 @@ def sample_messages() -> list[dict]:
     rng = np.random.default_rng(7)
     pose = np.concatenate([[0.1, -0.2, 3.0, 0.0, 1.0, 0.0, 0.0], rng.uniform(-0.2, 0.2, 29)])
     return [
-        message(0, [body_entry(result(1, pose))]),
+        message(0, [entry(1, pose)]),
         message(1, [], reason="skipped: color/000001.png missing"),
-        message(2, [body_entry(result(2, pose, unknown=(3, 7))), body_entry(result(3, None, "init", "no joints"), 1)]),
+        message(2, [entry(2, pose, unknown=(3, 7)), entry(3, None, "init", "no joints", body_id=1)]),
     ]
 
 
 # ---------------------------------------------------------------------------- JSONL
-
-
-def body_entry(result: BodyResult, body_id: int = 0) -> dict:
-    """One body of a frame message, as the tracker writes it."""
-    return replace(result, id=body_id).to_message()
 def test_jsonl_lines_are_the_messages_and_on_disk_at_once(tmp_path):
     path = tmp_path / "poses.jsonl"
     messages = sample_messages()
@@ -175,11 +168,11 @@ def write_and_check(tmp_path, body, poses: np.ndarray, fps: float = 30.0) -> Non
     sink = BvhSink(path, body, fps=fps)
     want = []
     for k, h in enumerate(poses):
-        sink.frame(message(k, [body_entry(result(k, h))]), None)
+        sink.frame(message(k, [entry(k, h)]), None)
         want.append(expected[k])
         if k % 4 == 1:  # a frame with no body, then one whose body has no pose: both repeat the row
             sink.frame(message(k, [], "no person"), None)
-            sink.frame(message(k, [body_entry(result(k, None, "lost", "lost"))]), None)
+            sink.frame(message(k, [entry(k, None, "lost", "lost")]), None)
             want += [expected[k], expected[k]]
         if k == 2:  # the file is complete while being written
             assert own_positions(path, body.bone_names).shape[0] == len(want)
@@ -244,11 +237,117 @@ def test_bvh_of_the_makehuman_body(tmp_path):
     write_and_check(tmp_path, body, camera_poses(body, "jumping_jacks", 6))
 
 
+# ---------------------------------------------------------------------------- several people
+SCENE: tuple[tuple[tuple[int, bool], ...], ...] = (
+    ((0, True),),
+    ((0, True), (1, False)),  # id 1 appears without a pose yet
+    ((0, True), (1, True)),
+    ((1, True),),  # id 0 absent
+    (),  # nobody
+    ((0, False), (1, True), (4, True)),  # id 0 lost; id 4 (a refound person's new id) appears
+    ((0, True), (4, True)),  # id 1 absent
+    ((4, True), (0, True)),  # the list in another order
+)
+"""Per frame message: the (id, has a pose) of each body it holds."""
+
+
+def scene_pose(poses: np.ndarray, body_id: int, k: int) -> np.ndarray:
+    """Pose (36,) of id ``body_id`` on frame ``k``: a walk at its own phase, 0.9 m beside the others."""
+    h = poses[(k + 3 * body_id) % len(poses)].copy()
+    h[0] += 0.9 * (body_id - 1)
+    return h
+
+
+def scene_messages(poses: np.ndarray) -> list[dict]:
+    return [message(k, [entry(10 * k + i, scene_pose(poses, i, k) if has_pose else None,
+                              "tracking" if has_pose else "init", "" if has_pose else "no joints yet", body_id=i)
+                        for i, has_pose in bodies], "" if bodies else "no person")
+            for k, bodies in enumerate(SCENE)]
+
+
+def expected_rows(body, poses: np.ndarray, body_id: int) -> tuple[int, np.ndarray]:
+    """First frame and poses (N, 36) of the rows of id ``body_id``'s file, by hand from SCENE:
+    from the frame the id first appears (0 for id 0), the last pose it had (rest, upright, at
+    the origin before any)."""
+    first = 0 if body_id == 0 else next(k for k, bodies in enumerate(SCENE) if body_id in dict(bodies))
+    last = body.rest_pose(quaternion=UPRIGHT)
+    rows = []
+    for k in range(first, len(SCENE)):
+        if dict(SCENE[k]).get(body_id):
+            last = scene_pose(poses, body_id, k)
+        rows.append(last)
+    return first, np.array(rows)
+
+
+def test_several_people_get_one_bvh_per_id(tmp_path, builtin_body):
+    poses = camera_poses(builtin_body, "walk", 12)
+    out = tmp_path / "replay"
+    sinks = open_recording(out, builtin_body, fps=20.0, overlay=False)
+    assert [type(s) for s in sinks] == [JsonlSink, CsvSink, PerIdBvhSink]
+    bvh = sinks[2]
+    names = {0: "poses.bvh", 1: "poses_id1.bvh", 4: "poses_id4.bvh"}
+    firsts = {i: expected_rows(builtin_body, poses, i)[0] for i in names}
+    for k, msg in enumerate(scene_messages(poses)):
+        for sink in sinks:
+            sink.frame(msg, None)
+        for i, name in names.items():  # created when the id first appears, complete after every frame
+            assert (out / name).exists() == (k >= firsts[i])
+            if k >= firsts[i]:
+                assert len(read_bvh(out / name)) == k + 1 - firsts[i]
+    assert bvh.path == out / "poses.bvh" and bvh.paths == [out / names[i] for i in (0, 1, 4)]
+    for sink in sinks:
+        sink.close()
+    bvh.close()  # idempotent
+    assert sorted(p.name for p in out.glob("*.bvh")) == sorted(names.values())
+    for i, name in names.items():
+        first, rows = expected_rows(builtin_body, poses, i)
+        clip = read_bvh(out / name)
+        assert len(clip) == len(SCENE) - first
+        assert clip.frame_time == pytest.approx(1 / 20.0)
+        np.testing.assert_allclose(clip.root_positions, rows[:, :3] * TO_BVH, atol=1e-4)  # the root channels
+        _, heads = forward_kinematics(builtin_body.rig, rows)
+        np.testing.assert_allclose(own_positions(out / name, builtin_body.bone_names), heads * TO_BVH, atol=1e-3)
+    with pytest.raises(OutputError, match="closed"):
+        bvh.frame(scene_messages(poses)[0], None)
+
+
+def test_several_people_give_one_csv_row_each(tmp_path, builtin_body):
+    poses = camera_poses(builtin_body, "walk", 12)
+    messages = scene_messages(poses)
+    sink = CsvSink(tmp_path / "poses.csv")
+    for msg in messages:
+        sink.frame(msg, None)
+    sink.close()
+    with open(tmp_path / "poses.csv", newline="", encoding="utf-8") as f:
+        rows = list(csv.DictReader(f))
+    want = [(k, i, has_pose) for k, bodies in enumerate(SCENE) for i, has_pose in bodies or ((None, False),)]
+    assert [(int(r["frame"]), int(r["body_id"]) if r["body_id"] else None) for r in rows] == [w[:2] for w in want]
+    for row, (k, i, has_pose) in zip(rows, want):
+        if has_pose:
+            np.testing.assert_allclose([float(row[n]) for n in POSE_NAMES], scene_pose(poses, i, k), atol=1e-6)
+            assert row["state"] == "tracking"
+        else:
+            assert row["tx"] == "" and row["reason"] in ("no joints yet", "no person")
+
+
+def test_bad_body_ids_are_refused(tmp_path, builtin_body):
+    sink = PerIdBvhSink(tmp_path, builtin_body)
+    for bad in (-1, "2", None, True):
+        with pytest.raises(OutputError, match=r"frame 3: body id .* is not an integer >= 0"):
+            sink.frame(message(3, [entry(0), {**entry(1), "id": bad}]), None)
+    sink.close()
+    assert [p.name for p in tmp_path.iterdir()] == ["poses.bvh"]
+    with pytest.raises(OutputError, match="body id -2"):
+        BvhSink(tmp_path / "other.bvh", builtin_body, body_id=-2)
+    assert not (tmp_path / "other.bvh").exists()
+
+
 # ---------------------------------------------------------------------------- folder and errors
 def test_open_recording_creates_the_files(tmp_path, builtin_body):
     out = tmp_path / "run" / "replay"
     sinks = open_recording(out, builtin_body, fps=15.0)
-    assert [type(s) for s in sinks] == [JsonlSink, CsvSink, BvhSink, OverlaySink]
+    assert [type(s) for s in sinks] == [JsonlSink, CsvSink, PerIdBvhSink, OverlaySink]
+    assert [s.path.name for s in sinks] == ["poses.jsonl", "poses.csv", "poses.bvh", "overlay.mp4"]
     for sink in sinks:
         sink.frame(sample_messages()[0], None)
         sink.close()
