@@ -8,8 +8,14 @@ drawn for a person to judge (``docs/qualitative/``).
 * ``five_people.png``: the real Kinect colour + depth frame of five people walking away from
   the camera (``rgbd/kinect_five_people``), tracked with the network on the colour.
 
-White bones and confidence-coloured dots are the tracked model's joints, small cyan dots the
-network's keypoints (score >= 0.3). One person per frame: several people are issue 14.
+With one body: white bones and confidence-coloured dots are the tracked model's joints; with
+several, each id in its own colour with its number. Small cyan dots are the network's
+keypoints (score >= 0.3). ``max_people`` (the ``settings``) tracks several people per frame.
+
+For each tracked body the report gives two plausibility figures (there is no ground truth):
+``span_m``, the distance from the head joint to the middle of the ankles, and, where the
+depth shows a floor (:func:`swarmpose.detect.floor.fit_floor`), ``feet_m``, how far the
+lower ankle sits above the floor beyond the body's own ankle height at rest (0 = standing on it).
 """
 
 from __future__ import annotations
@@ -20,10 +26,13 @@ import numpy as np
 
 from swarmpose.bench.detect import find_assets
 from swarmpose.bench.matrix import DETECTORS
+from swarmpose.body.skeleton import EVAL_JOINTS
+from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import SourceError
+from swarmpose.detect.floor import FloorPlane, fit_floor
 from swarmpose.pipeline.api import Tracker
-from swarmpose.publish.overlay import background, caption, draw_skeleton
+from swarmpose.publish.overlay import background, caption, draw_bodies
 from swarmpose.sources.base import Frame
 from swarmpose.sources.depth_shading import shaded_normals
 from swarmpose.sources.still import StillSource
@@ -72,11 +81,25 @@ def draw(frame: Frame, result: FrameResult) -> np.ndarray:
             for x, y, score in body.detection.keypoints:
                 if score >= 0.3:
                     cv2.circle(image, (int(round(x)), int(round(y))), 2, KEYPOINT_COLOR, -1, cv2.LINE_AA)
-    for body in message.get("bodies") or []:
-        draw_skeleton(image, body)
+    draw_bodies(image, message.get("bodies") or [])
     text = caption(message)
     cv2.putText(image, text, (5, image.shape[0] - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
     return image
+
+
+def ankle_rest_height(body: SkinnedBody) -> float:
+    """Height (m) of the body's ankle joints above its soles in the rest pose (rest mesh: y up)."""
+    return float(np.mean([body.point(a)[1] for a in ("left_ankle", "right_ankle")]) + body.floor_offset)
+
+
+def plausibility(joints3d: np.ndarray, floor: FloorPlane | None, ankle_height_m: float) -> dict:
+    """``span_m`` (head to mid-ankle, m) and ``feet_m`` (lower ankle above the floor minus
+    ``ankle_height_m``; None without a floor) of a body's joints (J, 3) m, ``EVAL_JOINTS`` order."""
+    j = {name: np.asarray(joints3d[k], float) for k, name in enumerate(EVAL_JOINTS)}
+    ankles = np.stack([j["left_ankle"], j["right_ankle"]])
+    span = float(np.linalg.norm(j["head"] - ankles.mean(axis=0)))
+    feet = None if floor is None else float(floor.height(ankles).min() - ankle_height_m)
+    return {"span_m": round(span, 3), "feet_m": None if feet is None else round(feet, 3)}
 
 
 def montage(images: list[np.ndarray], columns: int = 4, scale: float = 0.5) -> np.ndarray:
@@ -105,16 +128,21 @@ def write_overlays(out: Path, *, detector: str = "movenet", assets: str | Path |
     report = {}
     with Tracker(detector=spec, **(settings or {})) as tracker:
         pictures = {"skeltrack.png": skeltrack_frames(root), "five_people.png": [five_people_frame(root)]}
+        ankle_height = ankle_rest_height(tracker.body)
         for name, frames in pictures.items():
-            images, states = [], []
+            images, states, bodies = [], [], []
             for frame in frames:
                 tracker.reset()
                 if hasattr(tracker.detector, "reset"):  # BlazePose would crop around the last frame
                     tracker.detector.reset()
                 result = tracker.track_frame(frame)
                 images.append(draw(frame, result))
-                states.append(result.bodies[0].state if result.bodies else f"no body: {result.reason}")
+                states.append(", ".join(f"{b.id}: {b.state}" for b in result.bodies) if result.bodies
+                              else f"no body: {result.reason}")
+                floor = fit_floor(frame.depth, frame.intrinsics)
+                bodies.append([{"id": b.id, "state": b.state, **plausibility(b.joints3d, floor, ankle_height)}
+                               for b in result.bodies if b.state != "lost"])
             picture = montage(images) if len(images) > 1 else images[0]
             cv2.imwrite(str(out / name), picture[..., ::-1], [cv2.IMWRITE_PNG_COMPRESSION, 9])
-            report[name] = {"frames": len(frames), "states": states}
+            report[name] = {"frames": len(frames), "states": states, "bodies": bodies}
     return report

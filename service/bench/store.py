@@ -8,7 +8,7 @@ import json
 import os
 from pathlib import Path
 
-TRACKER_DEFAULTS = {"particles": 64, "generations": 64}
+TRACKER_DEFAULTS = {"particles": 64, "generations": 64, "max_people": 1}
 """The tracker settings every record stores, so that a resume compares them even when the
 caller left them at their defaults."""
 

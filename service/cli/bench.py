@@ -66,7 +66,7 @@ def _names(allowed: tuple[str, ...]):
 
 def cmd_bench_accuracy(args: argparse.Namespace) -> int:
     """The tracker over the benchmark matrix: per cell and mode Δ, A(100), lost frames, facing."""
-    tracker = {"particles": args.particles, "generations": args.generations}
+    tracker = {"particles": args.particles, "generations": args.generations, "max_people": args.max_people}
     records = run_matrix(Path(args.out), subset=args.subset, detectors=args.detectors, modes=args.modes,
                          frames=args.frames, tracker=tracker, assets=args.assets, progress=not quiet(args))
     out = Path(args.out)
@@ -107,7 +107,7 @@ def cmd_bench_utdmhad(args: argparse.Namespace) -> int:
 
 def cmd_bench_overlays(args: argparse.Namespace) -> int:
     """Overlay pictures of the tracker on the real Kinect frames without ground truth."""
-    settings = {"particles": args.particles, "generations": args.generations}
+    settings = {"particles": args.particles, "generations": args.generations, "max_people": args.max_people}
     report = write_overlays(Path(args.out), detector=args.detector, assets=args.assets, settings=settings)
     print(json.dumps(report) if args.json else "\n".join(
         f"{args.out}/{name}: {', '.join(r['states'])}" for name, r in report.items()))
@@ -169,6 +169,8 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
                    help=f"comma-separated subset of {', '.join(DETECTORS)} (default: the subset's)")
     p.add_argument("--modes", type=_names(MODES), default=MODES, help="comma-separated tracker modes")
     p.add_argument("--frames", type=positive_int, default=40, help="frames per sequence")
+    p.add_argument("--max-people", type=positive_int, default=1,
+                   help="people tracked per frame (> 1: segmentation and a detection per person)")
     _add_budget_and_assets(p)
     p.add_argument("--json", action="store_true", help="one JSON object with every record")
     p.set_defaults(func=cmd_bench_accuracy)
@@ -193,6 +195,7 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
     p.add_argument("--out", default="docs/qualitative", help="folder of the pictures")
     p.add_argument("--detector", choices=[d for d in DETECTORS if d != "simulated"], default="movenet",
                    help="2D network")
+    p.add_argument("--max-people", type=positive_int, default=6, help="people tracked per frame")
     _add_budget_and_assets(p)
     p.add_argument("--json", action="store_true", help="one JSON object")
     p.set_defaults(func=cmd_bench_overlays)

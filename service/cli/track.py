@@ -72,7 +72,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
               "shape": config.shape, "particles": t.particles, "generations": t.generations, "pso": t.pso,
               "depth_weight": t.depth_weight, "joints_weight": t.joints_weight, "seed": t.seed,
               "per_joint_mm": dict(zip(EVAL_JOINTS, accuracy["per_joint_mm"])), "source_error": run.source_error,
-              "sink_errors": run.sink_errors}
+              "sink_errors": run.sink_errors, "max_people": t.max_people}
+    if "people" in accuracy:
+        result["people"] = accuracy["people"]
     if args.plot:
         plot_accuracy({t.mode: {int(k): v for k, v in accuracy["A"].items()}}, args.plot, title=config.source)
         result["plot"] = args.plot

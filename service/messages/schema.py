@@ -16,10 +16,11 @@ import jsonschema
 
 from swarmpose.core.errors import ConfigError, ProtocolError
 
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3
 """The protocol as a whole; raised whenever one message's version is."""
-MESSAGE_VERSIONS = {"frame": 2, "status": 1, "info": 1}
-"""Each message's own version: frame 2 added the optional per-body ``detection``."""
+MESSAGE_VERSIONS = {"frame": 2, "status": 2, "info": 1}
+"""Each message's own version: frame 2 added the optional per-body ``detection``; status 2 the
+optional ``tracker.people`` counts."""
 SCHEMAS = ("frame", "status", "info")
 CAMERA_ID = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 

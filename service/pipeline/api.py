@@ -72,7 +72,9 @@ class Tracker:
         self._owns_detector = isinstance(detector, str)
         self.detector: Detector = make_detector(detector, source) if isinstance(detector, str) else detector
         self.intrinsics = intrinsics
-        self.pipeline = FramePipeline(self.detector, lambda intr: BodyTracker(self.body, intr, self.config))
+        self.pipeline = FramePipeline(
+            self.detector, lambda intr, body_id: BodyTracker(self.body, intr, self.config, body_id=body_id),
+            self.config.max_people, self.config.retire_frames)
         self._next_index = 0
         self._closed = False
 

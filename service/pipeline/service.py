@@ -46,7 +46,12 @@ class Parts:
     pipeline: FramePipeline
     sinks: list[Sink] = field(default_factory=list)
     score: ScoreSink | None = None
-    outputs: list[Path] = field(default_factory=list)
+    recording: list[Sink] = field(default_factory=list)
+
+    @property
+    def outputs(self) -> list[Path]:
+        """The files the recording sinks write so far (a BVH per id appears with its person)."""
+        return [Path(p) for s in self.recording for p in (getattr(s, "paths", None) or [s.path])]
 
     @property
     def fps(self) -> float:
@@ -56,7 +61,9 @@ class Parts:
 
 def make_pipeline(body: SkinnedBody, detector: Detector, config: ServiceConfig) -> FramePipeline:
     """The per-frame step tracking ``body`` with ``detector`` under ``config.tracker``."""
-    return FramePipeline(detector, lambda intrinsics: BodyTracker(body, intrinsics, config.tracker))
+    return FramePipeline(detector,
+                         lambda intrinsics, body_id: BodyTracker(body, intrinsics, config.tracker, body_id=body_id),
+                         config.tracker.max_people, config.tracker.retire_frames)
 
 
 def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score: bool = True,
@@ -82,7 +89,7 @@ def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score:
         for sink in recording:  # the run closes them; this covers a failure before it starts
             stack.callback(sink.close)
         parts.sinks.extend(recording)
-        parts.outputs = [Path(s.path) for s in recording]
+        parts.recording = recording
     if score and ground_truth is not None:
         parts.score = ScoreSink(ground_truth)
         parts.sinks.append(parts.score)
@@ -156,11 +163,14 @@ def run_summary(parts: Parts, stats: WorkerStats, seconds: float, worker: Worker
 
 def score_summary(parts: Parts) -> dict:
     """``mpjpe_mm``, ``coverage`` and ``A`` (threshold mm as text -> share) when the run was scored."""
-    if parts.score is None or not parts.score.estimates:
+    if parts.score is None or not parts.score.bodies:
         return {}
     summary = parts.score.summary()
-    return {"mpjpe_mm": summary["mpjpe_mm"], "coverage": summary["coverage"],
-            "A": {str(t): a for t, a in summary["A"].items()}, "per_joint_mm": summary["per_joint_mm"]}
+    out = {"mpjpe_mm": summary["mpjpe_mm"], "coverage": summary["coverage"],
+           "A": {str(t): a for t, a in summary["A"].items()}, "per_joint_mm": summary["per_joint_mm"]}
+    if parts.score.several:
+        out["people"] = parts.score.people_summary()
+    return out
 
 
 def format_summary(result: dict) -> str:
@@ -180,5 +190,15 @@ def format_accuracy(result: dict) -> list[str]:
     if "mpjpe_mm" not in result:
         return []
     delta = "n/a" if result["mpjpe_mm"] is None else f"{result['mpjpe_mm']:.1f} mm"
-    return [f"Δ = {delta}, A(100 mm) = {100 * result['A']['100']:.0f}%, coverage {result['coverage']:.0%}",
-            "A(t): " + "  ".join(f"{t}mm {100 * a:.0f}%" for t, a in result["A"].items())]
+    lines = [f"Δ = {delta}, A(100 mm) = {100 * result['A']['100']:.0f}%, coverage {result['coverage']:.0%}",
+             "A(t): " + "  ".join(f"{t}mm {100 * a:.0f}%" for t, a in result["A"].items())]
+    people = result.get("people")
+    if people:
+        lines[0] = f"first person: {lines[0]}"
+        lines.append(f"people: MOTA {people['mota']:.3f}, IDF1 {people['idf1']:.3f}, {people['id_switches']} "
+                     f"identity switches, {people['misses']} misses, {people['false_positives']} false positives")
+        for pid, p in people["per_person"].items():
+            d = "n/a" if p["mpjpe_mm"] is None else f"{p['mpjpe_mm']:.1f} mm"
+            lines.append(f"  person {pid}: Δ {d}, matched {p['matched_frames']}/{p['visible_frames']} visible "
+                         f"frames, longest loss {p['longest_lost_run']} frames, ids {p['ids']}")
+    return lines

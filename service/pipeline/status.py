@@ -48,15 +48,16 @@ class WorkerStats:
     tracker_state: str = "none"
     detector_error: str = ""
     tracker_error: str = ""
+    people: dict = field(default_factory=dict)
     keep_all: bool = False
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     def update(self, latency_ms: float | None = None, **changes: int | str) -> None:
-        """Add the integer ``changes`` to their counters, set the string ones, and record a
-        published frame's latency; all under one lock."""
+        """Add the integer ``changes`` to their counters, set the string and dict ones, and
+        record a published frame's latency; all under one lock."""
         with self._lock:
             for name, value in changes.items():
-                if isinstance(value, str):
+                if isinstance(value, (str, dict)):
                     setattr(self, name, value)
                 else:
                     setattr(self, name, getattr(self, name) + value)
@@ -74,6 +75,7 @@ class WorkerStats:
             counters = {k: getattr(self, k) for k in ("received", "published", "dropped", "skipped", "failed",
                                                       "detector_errors", "tracker_failures", "last_latency",
                                                       "tracker_state", "detector_error", "tracker_error")}
+            counters["people"] = dict(self.people)
         return published, latencies, counters
 
 
@@ -98,7 +100,8 @@ def status_message(camera: str, state: str, stats: WorkerStats, period_s: float,
         "frames": {k: s[k] for k in ("received", "published", "dropped", "skipped", "failed")},
         "source": {"uri": source_uri, "state": source_state},
         "detector": {"spec": detector_spec, "errors": s["detector_errors"], "last_error": s["detector_error"]},
-        "tracker": {"state": s["tracker_state"], "failures": s["tracker_failures"], "last_error": s["tracker_error"]},
+        "tracker": {"state": s["tracker_state"], "failures": s["tracker_failures"], "last_error": s["tracker_error"],
+                    **({"people": s["people"]} if s["people"] else {})},
         "zenoh": zenoh or dict(NO_ZENOH), "opencl_device": opencl_device, "errors": errors,
     }
 

@@ -10,6 +10,12 @@ joints, where the detector looks next) and the tracker, built for the first fram
   frame's ``reason``); the frame is still tracked (on depth alone);
 * :meth:`~FramePipeline.track`: a tracker that throws gives a frame without bodies whose
   reason says why, and the track restarts from the next detection.
+
+With ``max_people`` > 1 the detection half first finds the people in the depth
+(:func:`swarmpose.detect.people.segment_people`) and runs the detector on each one's crop
+(:func:`swarmpose.detect.per_person.detect_each`); the tracking half gives them to a
+:class:`~swarmpose.tracking.people_tracker.PeopleTracker` (one track and id per person).
+Where the segmentation finds nobody, the frame is detected and tracked as with one person.
 """
 
 from __future__ import annotations
@@ -25,21 +31,31 @@ import numpy as np
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import SwarmposeError
 from swarmpose.detect.joints import Detector, Joints2D
+from swarmpose.detect.people import Segmentation, segment_people
+from swarmpose.detect.per_person import PersonDetection, detect_each
 from swarmpose.sources.base import Frame, SkippedFrame, exc_message
 from swarmpose.tracking.body_tracker import BodyTracker
+from swarmpose.tracking.people_tracker import PeopleTracker
 from swarmpose.tracking.result import FrameResult
 
 log = logging.getLogger(__name__)
+FLOOR_REFIT_FRAMES = 15
+"""The floor plane is fitted again every this many frames (8 ms a fit; a camera may move)."""
+NOBODY = "no person found (none in the depth whose detection shows a person)"
 
 
 @dataclass
 class Detection:
     """The first half's answer for one frame: joints (None: none), a note when the detector
-    failed, and the detection time (ms)."""
+    failed, and the detection time (ms). With several people: ``people`` (each person's segment
+    and joints; None in single-person mode) and the ``segmentation`` they came from (None when
+    it found nobody and the whole frame was detected)."""
 
     joints: Joints2D | None
     note: str = ""
     ms: float = 0.0
+    people: tuple[PersonDetection, ...] | None = None
+    segmentation: Segmentation | None = None
 
 
 def describe_error(exc: BaseException) -> str:
@@ -51,41 +67,83 @@ class FramePipeline:
     """Detect and track frames of one camera.
 
     detector: a :class:`~swarmpose.detect.joints.Detector`; make_tracker: builds a
-    :class:`~swarmpose.tracking.body_tracker.BodyTracker` for a camera's intrinsics.
-    ``detect`` and ``track`` may run in two threads (one each).
+    :class:`~swarmpose.tracking.body_tracker.BodyTracker` for a camera's intrinsics and a
+    body id; max_people: 1 tracks one person (no segmentation), more tracks each person the
+    depth segmentation finds, up to this many; retire_frames: frames a person may go unseen
+    before its id is retired. ``detect`` and ``track`` may run in two threads (one each).
     """
 
-    def __init__(self, detector: Detector, make_tracker: Callable[[Intrinsics], BodyTracker]):
+    def __init__(self, detector: Detector, make_tracker: Callable[[Intrinsics, int], BodyTracker],
+                 max_people: int = 1, retire_frames: int = 30):
         self.detector, self.make_tracker = detector, make_tracker
+        self.max_people, self.retire_frames = int(max_people), int(retire_frames)
         self.tracker: BodyTracker | None = None
+        self.people: PeopleTracker | None = None
         self.intrinsics: Intrinsics | None = None
         self._box: np.ndarray | None = None
+        self._boxes: list[np.ndarray] = []  # the last frame's tracked bodies' joint boxes (several people)
+        self._floor: tuple = (None, None, 0)  # (floor plane, the camera it was fitted on, frames since)
         self._box_lock = threading.Lock()
 
     @property
     def device_name(self) -> str:
         """The OpenCL device the tracker scores on ("" before the first frame, or in lift mode)."""
+        if self.people is not None:
+            return self.people.device_name
         return "" if self.tracker is None else self.tracker.device_name
 
     def detect(self, frame: Frame) -> Detection:
-        """2D joints of ``frame``, looking first where the last tracked body was."""
+        """2D joints of ``frame``: of each person the depth shows (``max_people`` > 1), else of
+        the one person, looking first where the last tracked body was."""
+        t0 = time.perf_counter()
+        segmentation = None
+        if self.max_people > 1:
+            try:
+                segmentation = segment_people(frame.depth, frame.intrinsics, max_people=2 * self.max_people,
+                                              floor=self._known_floor(frame))
+                self._floor = (segmentation.floor, frame.intrinsics, self._floor_age(frame))
+            except Exception as exc:  # a segmentation that throws: the frame is detected as a whole
+                log.debug("frame %d: segmentation failed: %s", frame.index, exc_message(exc))
+        if segmentation is not None and segmentation.people:
+            with self._box_lock:
+                hints = list(self._boxes)
+            try:
+                people = detect_each(self.detector, frame, segmentation, hints)
+            except Exception as exc:  # e.g. a colour image of another size: the frame is detected as a whole
+                log.debug("frame %d: detection per person failed: %s", frame.index, exc_message(exc))
+                segmentation = None
+            else:
+                note = "; ".join(p.note for p in people if p.note)
+                return Detection(people[0].joints, note, 1000 * (time.perf_counter() - t0), people, segmentation)
         with self._box_lock:
             box = self._box
-        t0 = time.perf_counter()
         try:
             joints, note = self.detector.detect(frame, box), ""
         except Exception as exc:  # a detector that throws: the frame goes on without joints
             joints, note = None, f"detector failed: {exc_message(exc)}"
             log.debug("frame %d: %s", frame.index, note)
-        return Detection(joints, note, 1000 * (time.perf_counter() - t0))
+        people = (PersonDetection(None, joints, note),) if self.max_people > 1 else None
+        return Detection(joints, note, 1000 * (time.perf_counter() - t0), people, segmentation)
+
+    def _floor_age(self, frame: Frame) -> int:
+        """Frames since the floor plane in use was fitted (0: fitted on ``frame``)."""
+        floor, intrinsics, age = self._floor
+        return age + 1 if floor is not None and intrinsics == frame.intrinsics and age + 1 < FLOOR_REFIT_FRAMES else 0
+
+    def _known_floor(self, frame: Frame):
+        """The floor plane to reuse for ``frame``, or ``"auto"`` to fit it anew (none yet, a
+        new camera, or :data:`FLOOR_REFIT_FRAMES` frames since the last fit: a camera may move)."""
+        return self._floor[0] if self._floor_age(frame) > 0 else "auto"
 
     def track(self, frame: Frame, detection: Detection, received_ns: int = 0) -> FrameResult:
         """The bodies of ``frame`` given its detection; never raises for a frame it cannot track.
         received_ns: wall-clock time (ns) the frame was taken from its source (0: unknown)."""
         t0 = time.perf_counter()
+        if detection.people is not None:
+            return self._track_people(frame, detection, received_ns, t0)
         try:
             if self.tracker is None or self.intrinsics != frame.intrinsics:
-                self.tracker, self.intrinsics = self.make_tracker(frame.intrinsics), frame.intrinsics
+                self.tracker, self.intrinsics = self.make_tracker(frame.intrinsics, 0), frame.intrinsics
             body = self.tracker.step(frame, detection.joints)
         except Exception as exc:  # a frame that fails to track: no bodies, restart the track
             if self.tracker is not None:
@@ -102,6 +160,44 @@ class FramePipeline:
         timings["total"] = detection.ms + body.timings_ms.get("total", 1000 * (time.perf_counter() - t0))
         return FrameResult(frame.index, frame.timestamp_ns, (body,), detection.note, timings, received_ns=received_ns)
 
+    def _track_people(self, frame: Frame, detection: Detection, received_ns: int, t0: float) -> FrameResult:
+        """The several-people half of :meth:`track`."""
+        try:
+            if self.people is None or self.intrinsics != frame.intrinsics:
+                intrinsics, old = frame.intrinsics, self.people
+                if old is not None:  # a new camera: new trackers, the ids and counts go on
+                    old.reset()
+                self.people = PeopleTracker(lambda body_id: self.make_tracker(intrinsics, body_id), self.max_people,
+                                            self.retire_frames, first_id=0 if old is None else old.next_id,
+                                            counts=None if old is None else old.counts)
+                self.intrinsics = intrinsics
+            labels = None if detection.segmentation is None else detection.segmentation.labels
+            bodies = self.people.step(frame, detection.people, labels)
+        except Exception as exc:  # a frame that fails to track (not one person's fit): every track restarts
+            if self.people is not None:
+                self.people.reset()
+            with self._box_lock:
+                self._boxes = []
+            reason = "; ".join(r for r in (detection.note, f"tracking failed: {describe_error(exc)}") if r)
+            return FrameResult(frame.index, frame.timestamp_ns, (), reason,
+                               {"detect": detection.ms, "total": detection.ms + 1000 * (time.perf_counter() - t0)},
+                               received_ns=received_ns)
+        boxes = [b.joints_box() for b in bodies if b.state != "lost"]
+        with self._box_lock:
+            self._box = bodies[0].joints_box() if len(bodies) == 1 else None
+            self._boxes = [b for b in boxes if b is not None]
+        timings: dict[str, float] = {"detect": detection.ms}
+        for body in bodies:  # each body's parts (start, search, launch, ...) summed over the people
+            for key, ms in body.timings_ms.items():
+                timings[key] = timings.get(key, 0.0) + ms
+        timings["track"] = 1000 * (time.perf_counter() - t0)
+        timings["total"] = detection.ms + timings["track"]
+        found = sum(p.segment is not None for p in detection.people)
+        people = {"tracked": sum(b.state != "lost" for b in bodies), "found": found, **self.people.counts.as_dict()}
+        reason = detection.note if bodies else "; ".join(r for r in (detection.note, NOBODY) if r)
+        return FrameResult(frame.index, frame.timestamp_ns, bodies, reason, timings, received_ns=received_ns,
+                           people=people)
+
     def process(self, item: Frame | SkippedFrame) -> FrameResult:
         """Detect and track one source item (a skipped frame gives a result saying why)."""
         received_ns = time.time_ns()
@@ -110,11 +206,13 @@ class FramePipeline:
         return self.track(item, self.detect(item), received_ns)
 
     def reset(self) -> None:
-        """Forget the track and the detector's box."""
+        """Forget the tracks and the detector's box."""
         if self.tracker is not None:
             self.tracker.reset()
+        if self.people is not None:
+            self.people.reset()
         with self._box_lock:
-            self._box = None
+            self._box, self._boxes = None, []
 
 
 def skipped_result(item: SkippedFrame, received_ns: int = 0) -> FrameResult:

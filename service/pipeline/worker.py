@@ -281,7 +281,10 @@ class Worker:
             self.stats.update(skipped=1)
             return skipped_result(got.item, got.received_ns)
         result = self.pipeline.track(got.item, got.detection, got.received_ns)
-        if not result.bodies:  # the tracker failed on this frame
+        if result.people is not None:  # several people: a frame without anybody in view is no failure
+            state = result.bodies[0].state if result.bodies else "none"
+            self.stats.update(tracker_state=state, people=dict(result.people))
+        elif not result.bodies:  # the tracker failed on this frame
             self.stats.update(failed=1, tracker_failures=1, tracker_error=result.reason, tracker_state="lost")
             self.report(result.reason)
         else:

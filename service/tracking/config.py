@@ -34,6 +34,10 @@ class TrackerConfig:
     coarse_tile: tuple[int, int] = setting((32, 32), "depth tile WxH pixels of the coarse generations", kind="size")
     coarse_triangles: int = setting(500, "level of detail of the body mesh in the coarse generations, triangles",
                                     minimum=100)
+    max_people: int = setting(6, "track up to this many people, each found in the depth and detected on its own "
+                                 "crop (1: one person, no segmentation)", minimum=1, maximum=32)
+    retire_frames: int = setting(30, "frames a person may go unseen (occluded, crossing) before its id is retired",
+                                 minimum=0)
     seed: int = setting(0, "PSO seed (a run repeats exactly with the same seed)", minimum=0)
     start_budget: int = setting(64, "the start's PSOs per facing run at least this many particles and generations "
                                     "(once per track)", minimum=1)

@@ -93,7 +93,9 @@ class FrameResult:
     people (empty when the frame was skipped or failed); reason: why there are no bodies
     (skipped frame, detector or tracker failure; empty otherwise); timings_ms: detection and
     tracking time; skipped: the source could not deliver the frame; received_ns: wall-clock
-    time (ns) the frame was taken from the source (latency counts from there).
+    time (ns) the frame was taken from the source (latency counts from there); people: with
+    several people, the counts a status reports (``tracked``, ``found``, ``created``,
+    ``retired``, ``beyond_max_people``, ``no_person``), None in single-person mode.
     """
 
     index: int
@@ -103,6 +105,7 @@ class FrameResult:
     timings_ms: Mapping[str, float] = field(default_factory=dict)
     skipped: bool = False
     received_ns: int = 0
+    people: Mapping[str, int] | None = None
 
     @property
     def state(self) -> str:

@@ -85,7 +85,10 @@ def test_bad_input_is_named(wave_sequence):
             tracker.track(np.zeros((48, 64), np.float32))
         with pytest.raises(ShapeError, match="rgb"):
             tracker.track(np.zeros((480, 640), np.float32), np.zeros((480, 640), np.uint8))
-        empty = tracker.track(np.zeros((480, 640), np.float32))  # no person: a body that is lost, and why
+        empty = tracker.track(np.zeros((480, 640), np.float32))  # several-people mode: nobody, and why
+        assert empty.bodies == () and "no person" in empty.reason
+    with swarmpose.Tracker(detector="simulated", source=source, intrinsics=K, mode="lift", max_people=1) as tracker:
+        empty = tracker.track(np.zeros((480, 640), np.float32))  # one person: a body that is lost, and why
         assert empty.bodies[0].state == "lost" and empty.bodies[0].reason
     source.close()
 

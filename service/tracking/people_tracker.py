@@ -1,0 +1,268 @@
+"""Several people at once: one :class:`~swarmpose.tracking.body_tracker.BodyTracker` per person,
+each with a stable id.
+
+Per frame (:meth:`PeopleTracker.step`), given the people the depth segmentation found and
+each one's 2D joints (:func:`swarmpose.detect.per_person.detect_each`):
+
+1. **Association** (:mod:`swarmpose.tracking.association`): the tracks' expected centres
+   (last segment centre moved by the track's velocity) against the segments' centres, plus
+   their colour histograms; Hungarian assignment with a gate.
+2. **Each matched track** runs its own PSO on the frame with *the other people's pixels
+   removed from the depth* (set to 0, no measurement): a person in front of this one then
+   neither pulls its model forward nor counts against the model's hidden parts, since the
+   depth term skips pixels without a measurement (paper Eq. 2). A track whose fit is lost
+   keeps its id: its tracker restarts from the detection on the next frame.
+3. **New people** (segments no track took), largest first, get a new track while fewer than
+   ``max_people`` are tracked; the id is given only when the first fit finds a person (a
+   segment whose detection has no torso takes no id). The rest are counted as
+   ``beyond_max_people``.
+4. **Tracks not seen** this frame keep their id and state for ``retire_frames`` frames (a
+   short occlusion or a crossing), then are retired; ids are never reused. For the first
+   :data:`COAST_FRAMES` of those frames the track is followed on the depth alone (a person
+   mostly hidden behind another is often too small a piece to be segmented) and reported,
+   with the reason :data:`COASTING`, while its fit is not lost.
+
+Only the people seen (or followed) in a frame are reported in it. Where the segmentation found nobody (no
+person separable from the background: a person against a wall, a cut-off upper body) the
+caller passes one observation without a segment (the detector on the whole frame), which
+takes the most recently seen track or a new one, on the unmasked depth.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from swarmpose.detect.per_person import PersonDetection
+from swarmpose.sources.base import Frame
+from swarmpose.tracking.association import Assignment, assign, colour_histogram, pair_costs
+from swarmpose.tracking.body_tracker import BodyTracker
+from swarmpose.tracking.result import BodyResult
+
+log = logging.getLogger(__name__)
+
+GATE_M = 0.8
+"""A track and a segment farther apart than this (m, plus the appearance term) never pair."""
+APPEARANCE_M = 0.5
+"""Metres of centre distance that completely different colours weigh."""
+VELOCITY_BLEND = 0.5
+"""Share of the newest frame-to-frame motion in a track's velocity (exponential smoothing)."""
+LOOK_BLEND = 0.2
+"""Share of the newest colour histogram in a track's appearance."""
+COAST_FRAMES = 15
+"""A track not found in the segmentation (mostly hidden behind someone) is followed on the depth
+alone (no detection; every segmented person's pixels removed) for up to this many frames, and
+reported while its fit is not lost."""
+COASTING = "not found in the depth segmentation (hidden?): followed on the depth alone"
+
+
+@dataclass
+class Track:
+    """One person's track: id, its body tracker, where it was (centre (3,) m, camera frame),
+    its velocity (3,) m per frame, its colour histogram, and frames since it was last seen."""
+
+    id: int
+    tracker: BodyTracker
+    centre: np.ndarray
+    velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    look: np.ndarray | None = None
+    last_frame: int = 0
+    missed: int = 0
+
+    def expected(self, index: int) -> np.ndarray:
+        """Where the track's centre should be at frame ``index`` (3,) m."""
+        return self.centre + self.velocity * max(index - self.last_frame, 0)
+
+    def seen(self, centre: np.ndarray, look: np.ndarray | None, index: int) -> None:
+        """Update position, velocity and appearance with this frame's observation."""
+        steps = max(index - self.last_frame, 1)
+        if np.all(np.isfinite(centre)):
+            self.velocity = (1 - VELOCITY_BLEND) * self.velocity + VELOCITY_BLEND * (centre - self.centre) / steps
+            self.centre = centre
+        if look is not None:
+            self.look = look if self.look is None else (1 - LOOK_BLEND) * self.look + LOOK_BLEND * look
+        self.last_frame, self.missed = index, 0
+
+
+@dataclass
+class PeopleCounts:
+    """Running counts a status message reports: tracks made and retired, segments refused for
+    ``max_people``, segments whose detection held no person."""
+
+    created: int = 0
+    retired: int = 0
+    beyond_max_people: int = 0
+    no_person: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        """The counts by name."""
+        return {"created": self.created, "retired": self.retired, "beyond_max_people": self.beyond_max_people,
+                "no_person": self.no_person}
+
+
+class PeopleTracker:
+    """Tracks up to ``max_people`` people (see the module docstring).
+
+    make_tracker: builds the :class:`BodyTracker` of a new track given its id.
+    retire_frames: frames a track may go unseen before it is retired.
+    """
+
+    def __init__(self, make_tracker: Callable[[int], BodyTracker], max_people: int = 6, retire_frames: int = 30,
+                 first_id: int = 0, counts: PeopleCounts | None = None):
+        self.make_tracker, self.max_people, self.retire_frames = make_tracker, int(max_people), int(retire_frames)
+        self.tracks: list[Track] = []
+        self.counts = counts or PeopleCounts()
+        self._next_id = int(first_id)
+        self._spare: list[BodyTracker] = []  # trackers of retired or refused tracks, reused (no new scorer)
+
+    @property
+    def device_name(self) -> str:
+        """The OpenCL device of the trackers ("" before the first)."""
+        for tracker in [t.tracker for t in self.tracks] + self._spare:
+            return tracker.device_name
+        return ""
+
+    @property
+    def next_id(self) -> int:
+        """The id the next new person gets (ids are never reused)."""
+        return self._next_id
+
+    def reset(self) -> None:
+        """Forget every track (counted as retired; ids go on counting up)."""
+        for track in list(self.tracks):
+            self._retire(track)
+
+    def _release(self, tracker: BodyTracker) -> None:
+        tracker.reset()
+        self._spare.append(tracker)
+
+    def _tracker(self, body_id: int) -> BodyTracker:
+        if self._spare:
+            tracker = self._spare.pop()
+            tracker.body_id = body_id
+            return tracker
+        return self.make_tracker(body_id)
+
+    def step(self, frame: Frame, people: Sequence[PersonDetection], labels: np.ndarray | None = None
+             ) -> tuple[BodyResult, ...]:
+        """The bodies of ``frame``: one per person tracked in it, by id.
+
+        people: each person's segment and 2D joints (segment None: one whole-frame detection);
+        labels: (H, W) int the segmentation's person labels (k = ``people[k-1]``), None without.
+        A track whose fit throws restarts (its id stays); the other people go on."""
+        centres = [self._centre(p) for p in people]
+        looks = [colour_histogram(frame.color, p.segment.mask) if p.segment is not None else None for p in people]
+        results: dict[int, BodyResult] = {}
+        assignment = self._associate(frame.index, people, centres, looks)
+        for t, o in assignment.pairs:
+            track = self.tracks[t]
+            body = self._fit(track.tracker, self._frame_for(frame, labels, o, people[o]), people[o].joints)
+            if body is not None:
+                results[track.id] = body
+            track.seen(self._observed_centre(centres[o], body), looks[o], frame.index)
+        order = sorted(assignment.lone_observations, key=lambda o: -self._size(people[o]))
+        for o in order:
+            if len(self.tracks) >= self.max_people and not self._make_room():
+                self.counts.beyond_max_people += 1
+                continue
+            tracker = self._tracker(self._next_id)
+            body = self._fit(tracker, self._frame_for(frame, labels, o, people[o]), people[o].joints)
+            if body is None or body.state == "lost":  # no person in its detection: no id for it
+                self.counts.no_person += 1
+                self._release(tracker)
+                continue
+            track = Track(self._next_id, tracker, self._observed_centre(centres[o], body), look=looks[o],
+                          last_frame=frame.index)
+            self._next_id += 1
+            self.counts.created += 1
+            self.tracks.append(track)
+            results[track.id] = body
+        for track in list(self.tracks):
+            if track.id in results or track.last_frame == frame.index:
+                continue
+            track.missed += 1
+            if track.missed > self.retire_frames:
+                self._retire(track)
+            elif track.missed <= COAST_FRAMES and track.tracker.previous is not None:
+                body = self._fit(track.tracker, self._without_people(frame, labels), None)
+                if body is not None and body.state != "lost":
+                    results[track.id] = replace(body, reason=COASTING)
+                    track.centre, track.velocity = self._observed_centre(np.full(3, np.nan), body), np.zeros(3)
+        return tuple(results[i] for i in sorted(results))
+
+    def _fit(self, tracker: BodyTracker, frame: Frame, joints) -> BodyResult | None:
+        """One frame of one person's tracker; None (and the tracker restarted) when it throws."""
+        try:
+            return tracker.step(frame, joints)
+        except Exception as exc:  # one person's failure must not cost the others their fit
+            log.warning("frame %d: tracking person %d failed (%s: %s); it restarts", frame.index, tracker.body_id,
+                        type(exc).__name__, exc)
+            tracker.reset()
+            return None
+
+    def _retire(self, track: Track) -> None:
+        self.tracks.remove(track)
+        self._release(track.tracker)
+        self.counts.retired += 1
+
+    def _make_room(self) -> bool:
+        """At the cap, retire the longest-unseen track if one is unseen (a person who left makes
+        room for one who came); False when every track was seen this frame."""
+        waiting = [t for t in self.tracks if t.missed > 0]
+        if not waiting:
+            return False
+        self._retire(max(waiting, key=lambda t: t.missed))
+        return True
+
+    @staticmethod
+    def _observed_centre(centre: np.ndarray, body: BodyResult | None) -> np.ndarray:
+        """The segment's centre, or, without a segment (a whole-frame detection, a followed
+        track), the mean of the fit's finite joints (3,) m; NaN when neither is known."""
+        if np.all(np.isfinite(centre)) or body is None:
+            return centre
+        joints = body.joints3d[np.all(np.isfinite(body.joints3d), axis=1)]
+        return joints.mean(axis=0) if len(joints) else centre
+
+    def _associate(self, index: int, people: Sequence[PersonDetection], centres: list[np.ndarray],
+                   looks: list[np.ndarray | None]) -> Assignment:
+        """Tracks (rows) paired with this frame's people (columns); see the module docstring."""
+        if not people or not self.tracks:
+            return assign(np.zeros((len(self.tracks), len(people))) + 1e9)
+        if all(p.segment is None for p in people):  # a whole-frame detection: the most recent track
+            cost = np.full((len(self.tracks), len(people)), 1e9)
+            cost[int(np.argmax([t.last_frame for t in self.tracks])), 0] = 0.0
+            return assign(cost)
+        expected = np.stack([t.expected(index) for t in self.tracks])
+        return assign(pair_costs(expected, np.stack(centres), [t.look for t in self.tracks], looks,
+                                 APPEARANCE_M, GATE_M))
+
+    @staticmethod
+    def _centre(person: PersonDetection) -> np.ndarray:
+        if person.segment is None:
+            return np.full(3, np.nan)
+        return np.asarray(person.segment.centroid_m, dtype=np.float64)
+
+    @staticmethod
+    def _size(person: PersonDetection) -> int:
+        return 0 if person.segment is None else int(person.segment.pixels)
+
+    @staticmethod
+    def _without_people(frame: Frame, labels: np.ndarray | None) -> Frame:
+        """``frame`` with every segmented person's depth removed (0): what is left of a person
+        the segmentation did not find (mostly hidden) is background to the others."""
+        if labels is None or not np.any(labels):
+            return frame
+        return replace(frame, depth=np.where(labels != 0, np.float32(0.0), frame.depth))
+
+    @staticmethod
+    def _frame_for(frame: Frame, labels: np.ndarray | None, index: int, person: PersonDetection) -> Frame:
+        """``frame`` with the other people's depth removed (0) for person ``index`` (0-based)."""
+        if labels is None or person.segment is None:
+            return frame
+        others = (labels != 0) & (labels != index + 1)
+        if not others.any():
+            return frame
+        return replace(frame, depth=np.where(others, np.float32(0.0), frame.depth))
