@@ -126,10 +126,10 @@ def write_overlays(out: Path, *, detector: str = "movenet", assets: str | Path |
     out.mkdir(parents=True, exist_ok=True)
     spec = DETECTORS[detector].format(assets=root)
     report = {}
-    with Tracker(detector=spec, **(settings or {})) as tracker:
-        pictures = {"skeltrack.png": skeltrack_frames(root), "five_people.png": [five_people_frame(root)]}
-        ankle_height = ankle_rest_height(tracker.body)
-        for name, frames in pictures.items():
+    pictures = {"skeltrack.png": skeltrack_frames(root), "five_people.png": [five_people_frame(root)]}
+    for name, frames in pictures.items():
+        with Tracker(detector=spec, **(settings or {})) as tracker:  # ids from 0 in each picture
+            ankle_height = ankle_rest_height(tracker.body)
             images, states, bodies = [], [], []
             for frame in frames:
                 tracker.reset()

@@ -56,3 +56,25 @@ def test_an_upper_body_without_hips_in_view_is_tracked_from_its_shoulders():
         assert np.hypot(pixel[0] - found[name][0], pixel[1] - found[name][1]) < bound, name
     image = draw(frame, result)
     assert image.shape == (480, 640, 3) and np.any(np.all(image == (255, 255, 255), axis=-1))
+
+
+@needs_assets
+def test_the_five_people_frame_gives_five_plausible_skeletons():
+    """Real Kinect frame of five people walking away: each found in the depth, detected on its
+    own crop and fitted; head to mid-ankle 1.4-1.9 m, the lower ankle within 12 cm of the
+    floor plane the depth shows (beyond the body's ankle height at rest)."""
+    from swarmpose.bench.qualitative import ankle_rest_height, plausibility
+    from swarmpose.detect.floor import fit_floor
+
+    frame = five_people_frame(ASSETS)
+    with Tracker(detector=f"onnx:{MOVENET}", particles=16, generations=8, start_budget=24) as tracker:
+        result = tracker.track_frame(frame)
+        ankle = ankle_rest_height(tracker.body)
+    bodies = [b for b in result.bodies if b.state != "lost"]
+    assert len({b.id for b in bodies}) >= 4, result.reason
+    floor = fit_floor(frame.depth, frame.intrinsics)
+    for body in bodies:
+        fig = plausibility(body.joints3d, floor, ankle)
+        assert 1.4 < fig["span_m"] < 1.9 and abs(fig["feet_m"]) < 0.12, (body.id, fig)
+    heads = sorted(float(b.joints2d[0, 0]) for b in bodies)
+    assert np.all(np.diff(heads) > 40)  # different people, not one person found twice
