@@ -86,6 +86,7 @@ class BodyTracker:
             self.objective = Objective(self.body, intrinsics, scorer, self.weights, coarse)
         self.history: list[np.ndarray] = []
         self.previous: np.ndarray | None = None
+        self.others_removed = False  # set by the several-people tracker: the depth lacks other people
         self.lo, self.hi = search.pose_bounds()
 
     @property
@@ -167,7 +168,8 @@ class BodyTracker:
             best = self._smooth(best)
         tile, counts = self._render(best)
         out_state, reason = verdict.judge(self.objective, counts, targets, parts, state,
-                                          self.config.lost_joint_error, self.config.lost_depth_agreement)
+                                          self.config.lost_joint_error, self.config.lost_depth_agreement,
+                                          self.others_removed)
         if out_state == "lost":
             self.reset()
         else:

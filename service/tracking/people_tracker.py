@@ -159,7 +159,7 @@ class PeopleTracker:
         assignment = self._associate(frame.index, people, centres, looks)
         for t, o in assignment.pairs:
             track = self.tracks[t]
-            body = self._fit(track.tracker, self._frame_for(frame, labels, o, people[o]), people[o].joints)
+            body = self._fit(track.tracker, self._frame_for(frame, labels, o, people[o]), people[o].joints, frame)
             if body is not None:
                 results[track.id] = body
             track.seen(self._observed_centre(centres[o], body), looks[o], frame.index)
@@ -169,7 +169,7 @@ class PeopleTracker:
                 self.counts.beyond_max_people += 1
                 continue
             tracker = self._tracker(self._next_id)
-            body = self._fit(tracker, self._frame_for(frame, labels, o, people[o]), people[o].joints)
+            body = self._fit(tracker, self._frame_for(frame, labels, o, people[o]), people[o].joints, frame)
             if body is None or body.state == "lost":  # no person in its detection: no id for it
                 self.counts.no_person += 1
                 self._release(tracker)
@@ -187,14 +187,17 @@ class PeopleTracker:
             if track.missed > self.retire_frames:
                 self._retire(track)
             elif track.missed <= COAST_FRAMES and track.tracker.previous is not None:
-                body = self._fit(track.tracker, self._without_people(frame, labels), None)
+                body = self._fit(track.tracker, self._without_people(frame, labels), None, frame)
                 if body is not None and body.state != "lost":
                     results[track.id] = replace(body, reason=COASTING)
                     track.centre, track.velocity = self._observed_centre(np.full(3, np.nan), body), np.zeros(3)
         return tuple(results[i] for i in sorted(results))
 
-    def _fit(self, tracker: BodyTracker, frame: Frame, joints) -> BodyResult | None:
-        """One frame of one person's tracker; None (and the tracker restarted) when it throws."""
+    def _fit(self, tracker: BodyTracker, frame: Frame, joints, whole: Frame | None = None) -> BodyResult | None:
+        """One frame of one person's tracker; None (and the tracker restarted) when it throws.
+        whole: the frame before other people were removed from ``frame``'s depth (None: the
+        same); where they were, the fit's depth agreement counts only the pixels they do not hide."""
+        tracker.others_removed = whole is not None and frame.depth is not whole.depth
         try:
             return tracker.step(frame, joints)
         except Exception as exc:  # one person's failure must not cost the others their fit

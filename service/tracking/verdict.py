@@ -20,17 +20,21 @@ from swarmpose.tracking.objective import JointTargets, Objective
 
 
 def judge(objective: Objective, counts: dict[str, np.ndarray] | None, targets: JointTargets,
-          parts: dict[str, float], state: str, lost_joint_error: float, lost_depth_agreement: float) -> tuple[str, str]:
+          parts: dict[str, float], state: str, lost_joint_error: float, lost_depth_agreement: float,
+          observed_only: bool = False) -> tuple[str, str]:
     """(state, reason) of the chosen pose: ``state`` kept, or ``lost`` with why.
 
-    counts: the scorer's ``rendered`` / ``close`` pixel counts of the chosen pose (None: no
-    observed depth in the box); parts: its objective terms (E_J2D px)."""
+    counts: the scorer's ``rendered`` / ``both`` / ``close`` pixel counts of the chosen pose
+    (None: no observed depth in the box); parts: its objective terms (E_J2D px);
+    observed_only: the depth agreement counts only the model's pixels that have an
+    observation (``both``), for a depth with other people's pixels removed: the model's
+    parts behind them are hidden, not wrong."""
     if objective.uses_joints:
         size = targets.extent_px
         if size > 0 and parts["E_J2D"] > lost_joint_error * size:
             return "lost", f"2D joints off by {parts['E_J2D']:.0f} px (person {size:.0f} px)"
     if counts is not None and objective.weights.depth > 0:
-        rendered = int(counts["rendered"][0])
+        rendered = int(counts["both" if observed_only else "rendered"][0])
         agree = int(counts["close"][0]) / rendered if rendered else 0.0
         if agree < lost_depth_agreement:
             return "lost", f"only {100 * agree:.0f} % of the model's pixels agree with the depth"
