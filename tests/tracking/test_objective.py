@@ -217,7 +217,7 @@ def test_device_joint_terms_match_the_numpy_oracle(body, scene, label_swaps):
     from swarmpose.body.skeleton import ANGLE_LIMITS
 
     h, depth = scene
-    rng = np.random.default_rng()
+    rng = np.random.default_rng(14)  # seeded: an unseeded draw had no penetrating pose once in a while
     names = tuple(n for n in body.point_names if n in EVAL_JOINTS)
     truth = body.posed_points(h[None], names)[0]
     xy = INTR.project(truth) + rng.normal(0.0, 4.0, (len(names), 2))
