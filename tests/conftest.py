@@ -49,3 +49,15 @@ def free_port() -> int:
     from swarmpose.cli.demo import free_local_port
 
     return free_local_port()
+
+
+def synthesize_scene(out: Path, specs: tuple[str, ...], frames: int, seed: int, camera_distance: float = 3.5) -> Path:
+    """A synthetic several-people sequence in ``out`` from ``--person`` specs (see
+    :func:`swarmpose.sim.scene.parse_person_spec`); returns ``out``."""
+    from swarmpose.sim.scene import load_people, parse_person_spec
+    from swarmpose.sim.synth import SynthConfig, synthesize_people
+
+    people = load_people([parse_person_spec(p) for p in specs], frames, 30.0)
+    synthesize_people(people, out, SynthConfig(frames=frames, camera_distance=camera_distance, seed=seed),
+                      progress=False)
+    return out

@@ -58,19 +58,17 @@ def masked_colour(color: np.ndarray, labels: np.ndarray, keep: int) -> np.ndarra
 def on_segment_share(joints: Joints2D, segment: PersonSegment) -> float:
     """Share (0..1) of the confident keypoints of ``joints`` within :data:`ON_SEGMENT_PX` of
     ``segment.mask``; 1 when none is confident (nothing to contradict the segment)."""
-    import cv2
-
     kp = joints.keypoints
     ok = (kp[:, 2] >= KEYPOINT_MIN_SCORE) & np.all(np.isfinite(kp[:, :2]), axis=1)
     if not ok.any():
         return 1.0
-    size = 2 * ON_SEGMENT_PX + 1
-    near = cv2.dilate(segment.mask.astype(np.uint8), np.ones((size, size), np.uint8)) > 0
-    h, w = near.shape
-    u = np.clip(np.round(kp[ok, 0]).astype(int), 0, w - 1)
-    v = np.clip(np.round(kp[ok, 1]).astype(int), 0, h - 1)
-    inside = (kp[ok, 0] >= 0) & (kp[ok, 0] < w) & (kp[ok, 1] >= 0) & (kp[ok, 1] < h)
-    return float(np.mean(near[v, u] & inside))
+    mask, r = segment.mask, ON_SEGMENT_PX
+    h, w = mask.shape
+    on = []
+    for x, y in kp[ok, :2]:  # the square window of each keypoint (K <= 33): no full-frame dilation
+        u, v = int(round(x)), int(round(y))
+        on.append(0 <= x < w and 0 <= y < h and bool(mask[max(v - r, 0):v + r + 1, max(u - r, 0):u + r + 1].any()))
+    return float(np.mean(on))
 
 
 def box_iou(a: np.ndarray, b: np.ndarray) -> float:

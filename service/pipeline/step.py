@@ -30,6 +30,7 @@ import numpy as np
 
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import SwarmposeError
+from swarmpose.detect.floor import FloorPlane
 from swarmpose.detect.joints import Detector, Joints2D
 from swarmpose.detect.people import Segmentation, segment_people
 from swarmpose.detect.per_person import PersonDetection, detect_each
@@ -63,6 +64,26 @@ def describe_error(exc: BaseException) -> str:
     return str(exc) if isinstance(exc, SwarmposeError) else f"{type(exc).__name__}: {exc_message(exc)}"
 
 
+@dataclass
+class FloorCache:
+    """The floor plane the segmentation reuses: fitted on a camera, used for
+    :data:`FLOOR_REFIT_FRAMES` frames of it, then fitted again (a camera may move)."""
+
+    plane: FloorPlane | None = None
+    intrinsics: Intrinsics | None = None
+    frames: int = 0
+
+    def reusable(self, intrinsics: Intrinsics) -> bool:
+        """Whether the plane may serve another frame of camera ``intrinsics``."""
+        return self.plane is not None and self.intrinsics == intrinsics and self.frames < FLOOR_REFIT_FRAMES
+
+    def used(self, plane: FloorPlane | None, intrinsics: Intrinsics, fitted: bool) -> None:
+        """Count a frame segmented with ``plane`` (``fitted``: fitted anew on it)."""
+        if fitted:
+            self.plane, self.intrinsics, self.frames = plane, intrinsics, 0
+        self.frames += 1
+
+
 class FramePipeline:
     """Detect and track frames of one camera.
 
@@ -82,7 +103,7 @@ class FramePipeline:
         self.intrinsics: Intrinsics | None = None
         self._box: np.ndarray | None = None
         self._boxes: list[np.ndarray] = []  # the last frame's tracked bodies' joint boxes (several people)
-        self._floor: tuple = (None, None, 0)  # (floor plane, the camera it was fitted on, frames since)
+        self._floor = FloorCache()
         self._box_lock = threading.Lock()
 
     @property
@@ -99,9 +120,10 @@ class FramePipeline:
         segmentation = None
         if self.max_people > 1:
             try:
+                reuse = self._floor.reusable(frame.intrinsics)
                 segmentation = segment_people(frame.depth, frame.intrinsics, max_people=2 * self.max_people,
-                                              floor=self._known_floor(frame))
-                self._floor = (segmentation.floor, frame.intrinsics, self._floor_age(frame))
+                                              floor=self._floor.plane if reuse else "auto")
+                self._floor.used(segmentation.floor, frame.intrinsics, fitted=not reuse)
             except Exception as exc:  # a segmentation that throws: the frame is detected as a whole
                 log.debug("frame %d: segmentation failed: %s", frame.index, exc_message(exc))
         if segmentation is not None and segmentation.people:
@@ -125,16 +147,6 @@ class FramePipeline:
         people = (PersonDetection(None, joints, note),) if self.max_people > 1 else None
         return Detection(joints, note, 1000 * (time.perf_counter() - t0), people, segmentation)
 
-    def _floor_age(self, frame: Frame) -> int:
-        """Frames since the floor plane in use was fitted (0: fitted on ``frame``)."""
-        floor, intrinsics, age = self._floor
-        return age + 1 if floor is not None and intrinsics == frame.intrinsics and age + 1 < FLOOR_REFIT_FRAMES else 0
-
-    def _known_floor(self, frame: Frame):
-        """The floor plane to reuse for ``frame``, or ``"auto"`` to fit it anew (none yet, a
-        new camera, or :data:`FLOOR_REFIT_FRAMES` frames since the last fit: a camera may move)."""
-        return self._floor[0] if self._floor_age(frame) > 0 else "auto"
-
     def track(self, frame: Frame, detection: Detection, received_ns: int = 0) -> FrameResult:
         """The bodies of ``frame`` given its detection; never raises for a frame it cannot track.
         received_ns: wall-clock time (ns) the frame was taken from its source (0: unknown)."""
@@ -148,12 +160,7 @@ class FramePipeline:
         except Exception as exc:  # a frame that fails to track: no bodies, restart the track
             if self.tracker is not None:
                 self.tracker.reset()
-            reason = "; ".join(r for r in (detection.note, f"tracking failed: {describe_error(exc)}") if r)
-            with self._box_lock:
-                self._box = None
-            return FrameResult(frame.index, frame.timestamp_ns, (), reason,
-                               {"detect": detection.ms, "total": detection.ms + 1000 * (time.perf_counter() - t0)},
-                               received_ns=received_ns)
+            return self._failed(frame, detection, exc, received_ns, t0)
         with self._box_lock:
             self._box = body.joints_box()
         timings = {"detect": detection.ms, **body.timings_ms}
@@ -176,12 +183,7 @@ class FramePipeline:
         except Exception as exc:  # a frame that fails to track (not one person's fit): every track restarts
             if self.people is not None:
                 self.people.reset()
-            with self._box_lock:
-                self._boxes = []
-            reason = "; ".join(r for r in (detection.note, f"tracking failed: {describe_error(exc)}") if r)
-            return FrameResult(frame.index, frame.timestamp_ns, (), reason,
-                               {"detect": detection.ms, "total": detection.ms + 1000 * (time.perf_counter() - t0)},
-                               received_ns=received_ns)
+            return self._failed(frame, detection, exc, received_ns, t0)
         boxes = [b.joints_box() for b in bodies if b.state != "lost"]
         with self._box_lock:
             self._box = bodies[0].joints_box() if len(bodies) == 1 else None
@@ -197,6 +199,17 @@ class FramePipeline:
         reason = detection.note if bodies else "; ".join(r for r in (detection.note, NOBODY) if r)
         return FrameResult(frame.index, frame.timestamp_ns, bodies, reason, timings, received_ns=received_ns,
                            people=people)
+
+    def _failed(self, frame: Frame, detection: Detection, exc: BaseException, received_ns: int,
+                t0: float) -> FrameResult:
+        """The result of a frame whose tracking threw: no bodies, the reason, and no box to
+        look in next (the tracks restart from the next detection)."""
+        with self._box_lock:
+            self._box, self._boxes = None, []
+        reason = "; ".join(r for r in (detection.note, f"tracking failed: {describe_error(exc)}") if r)
+        return FrameResult(frame.index, frame.timestamp_ns, (), reason,
+                           {"detect": detection.ms, "total": detection.ms + 1000 * (time.perf_counter() - t0)},
+                           received_ns=received_ns)
 
     def process(self, item: Frame | SkippedFrame) -> FrameResult:
         """Detect and track one source item (a skipped frame gives a result saying why)."""

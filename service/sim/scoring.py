@@ -28,7 +28,7 @@ class ScoreSink:
 
     ``summary()``: :func:`swarmpose.sim.evaluate.summarise` over the frames the run went through
     (a frame without a body or without a joint counts as a miss); the estimate of a frame is
-    the body matched to the (first) true person (see :attr:`estimates`), so a second body
+    the body matched to the (first) true person (see :meth:`estimates`), so a second body
     found elsewhere does not replace it. ``people_summary()``: with several true people, :func:`score_people`.
     """
 
@@ -48,7 +48,6 @@ class ScoreSink:
         lost = [body_joints(b) for b in message["bodies"] if b.get("state") == "lost"]
         self._lost[index] = lost[0] if lost else None
 
-    @property
     def estimates(self) -> dict[int, np.ndarray]:
         """Frame -> (J, 3) m estimate of the (first) true person: the body that the tracking
         metrics' matching (:func:`score_people`: nearest within 0.5 m, kept while it stays so;
@@ -95,5 +94,5 @@ class ScoreSink:
 
     def summary(self) -> dict:
         """Δ (``mpjpe_mm``), ``A``, ``coverage``, ``frames``, ``per_joint_mm`` of the frames seen."""
-        estimates = self.estimates
+        estimates = self.estimates()
         return summarise_frames(self.ground_truth, sorted(estimates), estimates)

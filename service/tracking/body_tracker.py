@@ -86,7 +86,6 @@ class BodyTracker:
             self.objective = Objective(self.body, intrinsics, scorer, self.weights, coarse)
         self.history: list[np.ndarray] = []
         self.previous: np.ndarray | None = None
-        self.others_removed = False  # set by the several-people tracker: the depth lacks other people
         self.lo, self.hi = search.pose_bounds()
 
     @property
@@ -114,8 +113,10 @@ class BodyTracker:
         return box_around(np.concatenate(pts), margin=0.1)
 
     # ------------------------------------------------------------------ per frame
-    def step(self, frame: Frame, joints: Joints2D | None) -> BodyResult:
-        """Track one frame with its detection (None: no detector output for it)."""
+    def step(self, frame: Frame, joints: Joints2D | None, others_removed: bool = False) -> BodyResult:
+        """Track one frame with its detection (None: no detector output for it). others_removed:
+        other people's pixels were taken out of ``frame.depth`` (several people), so the lost
+        test's depth agreement counts only the model's pixels that have an observation."""
         t0 = time.perf_counter()
         depth = np.asarray(frame.depth, dtype=np.float32)
         if depth.shape != (self.intrinsics.height, self.intrinsics.width):
@@ -169,7 +170,7 @@ class BodyTracker:
         tile, counts = self._render(best)
         out_state, reason = verdict.judge(self.objective, counts, targets, parts, state,
                                           self.config.lost_joint_error, self.config.lost_depth_agreement,
-                                          self.others_removed)
+                                          observed_only=others_removed)
         if out_state == "lost":
             self.reset()
         else:

@@ -38,7 +38,7 @@ import numpy as np
 
 from swarmpose.detect.per_person import PersonDetection
 from swarmpose.sources.base import Frame
-from swarmpose.tracking.association import Assignment, assign, colour_histogram, pair_costs
+from swarmpose.tracking.association import NO_PAIR, Assignment, assign, colour_histogram, pair_costs
 from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.result import BodyResult
 
@@ -159,7 +159,7 @@ class PeopleTracker:
         assignment = self._associate(frame.index, people, centres, looks)
         for t, o in assignment.pairs:
             track = self.tracks[t]
-            body = self._fit(track.tracker, self._frame_for(frame, labels, o, people[o]), people[o].joints, frame)
+            body = self._fit(track.tracker, frame, self._frame_for(frame, labels, o, people[o]), people[o].joints)
             if body is not None:
                 results[track.id] = body
             track.seen(self._observed_centre(centres[o], body), looks[o], frame.index)
@@ -169,7 +169,7 @@ class PeopleTracker:
                 self.counts.beyond_max_people += 1
                 continue
             tracker = self._tracker(self._next_id)
-            body = self._fit(tracker, self._frame_for(frame, labels, o, people[o]), people[o].joints, frame)
+            body = self._fit(tracker, frame, self._frame_for(frame, labels, o, people[o]), people[o].joints)
             if body is None or body.state == "lost":  # no person in its detection: no id for it
                 self.counts.no_person += 1
                 self._release(tracker)
@@ -187,19 +187,17 @@ class PeopleTracker:
             if track.missed > self.retire_frames:
                 self._retire(track)
             elif track.missed <= COAST_FRAMES and track.tracker.previous is not None:
-                body = self._fit(track.tracker, self._without_people(frame, labels), None, frame)
+                body = self._fit(track.tracker, frame, self._without_people(frame, labels), None)
                 if body is not None and body.state != "lost":
                     results[track.id] = replace(body, reason=COASTING)
-                    track.centre, track.velocity = self._observed_centre(np.full(3, np.nan), body), np.zeros(3)
+                    track.centre, track.velocity = self._fit_centre(body, track.centre), np.zeros(3)
         return tuple(results[i] for i in sorted(results))
 
-    def _fit(self, tracker: BodyTracker, frame: Frame, joints, whole: Frame | None = None) -> BodyResult | None:
-        """One frame of one person's tracker; None (and the tracker restarted) when it throws.
-        whole: the frame before other people were removed from ``frame``'s depth (None: the
-        same); where they were, the fit's depth agreement counts only the pixels they do not hide."""
-        tracker.others_removed = whole is not None and frame.depth is not whole.depth
+    def _fit(self, tracker: BodyTracker, frame: Frame, seen: Frame, joints) -> BodyResult | None:
+        """One person's tracker on ``seen`` (``frame``, or a copy with other people's depth
+        removed); None (and the tracker restarted) when it throws."""
         try:
-            return tracker.step(frame, joints)
+            return tracker.step(seen, joints, others_removed=seen is not frame)
         except Exception as exc:  # one person's failure must not cost the others their fit
             log.warning("frame %d: tracking person %d failed (%s: %s); it restarts", frame.index, tracker.body_id,
                         type(exc).__name__, exc)
@@ -221,21 +219,24 @@ class PeopleTracker:
         return True
 
     @staticmethod
-    def _observed_centre(centre: np.ndarray, body: BodyResult | None) -> np.ndarray:
-        """The segment's centre, or, without a segment (a whole-frame detection, a followed
-        track), the mean of the fit's finite joints (3,) m; NaN when neither is known."""
-        if np.all(np.isfinite(centre)) or body is None:
-            return centre
+    def _fit_centre(body: BodyResult | None, otherwise: np.ndarray) -> np.ndarray:
+        """The mean (3,) m of the fit's finite joints; ``otherwise`` without any."""
+        if body is None:
+            return otherwise
         joints = body.joints3d[np.all(np.isfinite(body.joints3d), axis=1)]
-        return joints.mean(axis=0) if len(joints) else centre
+        return joints.mean(axis=0) if len(joints) else otherwise
+
+    def _observed_centre(self, centre: np.ndarray, body: BodyResult | None) -> np.ndarray:
+        """The segment's centre, or, without a segment (a whole-frame detection), the fit's."""
+        return centre if np.all(np.isfinite(centre)) else self._fit_centre(body, centre)
 
     def _associate(self, index: int, people: Sequence[PersonDetection], centres: list[np.ndarray],
                    looks: list[np.ndarray | None]) -> Assignment:
         """Tracks (rows) paired with this frame's people (columns); see the module docstring."""
+        cost = np.full((len(self.tracks), len(people)), NO_PAIR)
         if not people or not self.tracks:
-            return assign(np.zeros((len(self.tracks), len(people))) + 1e9)
+            return assign(cost)
         if all(p.segment is None for p in people):  # a whole-frame detection: the most recent track
-            cost = np.full((len(self.tracks), len(people)), 1e9)
             cost[int(np.argmax([t.last_frame for t in self.tracks])), 0] = 0.0
             return assign(cost)
         expected = np.stack([t.expected(index) for t in self.tracks])

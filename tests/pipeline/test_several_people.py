@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import synthesize_scene
 
 import swarmpose
 from swarmpose.body.loader import load_body
@@ -17,9 +18,7 @@ from swarmpose.messages import validate
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.pipeline.worker import Worker
 from swarmpose.sim.people_metrics import TruePerson, score_people
-from swarmpose.sim.scene import load_people, parse_person_spec
 from swarmpose.sim.scoring import body_joints
-from swarmpose.sim.synth import SynthConfig, synthesize_people
 from swarmpose.sources.folder import FolderSource
 from swarmpose.sources.groundtruth import load_ground_truth
 from swarmpose.sources.registry import open_source
@@ -34,10 +33,7 @@ PEOPLE = ("builtin:male:builtin:walk@-0.7,0.3", "builtin:female:builtin:wave@0.6
 
 @pytest.fixture(scope="module")
 def three(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("three")
-    people = load_people([parse_person_spec(p) for p in PEOPLE], FRAMES, 30.0)
-    synthesize_people(people, out, SynthConfig(frames=FRAMES, camera_distance=3.5, seed=3), progress=False)
-    return out
+    return synthesize_scene(tmp_path_factory.mktemp("three"), PEOPLE, FRAMES, seed=3)
 
 
 def _truth(folder: Path) -> dict[int, list[TruePerson]]:
@@ -213,3 +209,30 @@ def test_crop_boxes_give_each_hint_to_one_segment_at_most():
     assert box_iou(np.array([0, 0, 2, 2]), np.array([1, 1, 3, 3])) == pytest.approx(1 / 7)
     far = np.array([500.0, 0.0, 600.0, 100.0])
     assert [np.array_equal(o, s.box) for o, s in zip(crop_boxes(segs, [far]), segs)] == [True, True]
+
+
+def test_on_segment_share_is_the_share_of_keypoints_within_reach_of_the_mask():
+    """Against OpenCV's dilation of the mask by the reach (a (2r+1)-square kernel)."""
+    import cv2
+
+    from swarmpose.body.skeleton import COCO17
+    from swarmpose.detect.joints import Joints2D
+    from swarmpose.detect.per_person import KEYPOINT_MIN_SCORE, ON_SEGMENT_PX, on_segment_share
+
+    rng = np.random.default_rng(5)
+    mask = np.zeros((120, 160), bool)
+    mask[30:90, 50:100] = True
+    near = cv2.dilate(mask.astype(np.uint8), np.ones((2 * ON_SEGMENT_PX + 1,) * 2, np.uint8)) > 0
+
+    class Seg:  # on_segment_share reads only the mask
+        pass
+
+    segment = Seg()
+    segment.mask = mask
+    for _ in range(20):
+        kp = np.column_stack([rng.uniform(-10, 170, 17), rng.uniform(-10, 130, 17), rng.uniform(0, 1, 17)])
+        ok = kp[:, 2] >= KEYPOINT_MIN_SCORE
+        u, v = np.round(kp[ok, 0]).astype(int), np.round(kp[ok, 1]).astype(int)
+        inside = (kp[ok, 0] >= 0) & (kp[ok, 0] < 160) & (kp[ok, 1] >= 0) & (kp[ok, 1] < 120)
+        want = np.mean(inside & near[np.clip(v, 0, 119), np.clip(u, 0, 159)]) if ok.any() else 1.0
+        assert on_segment_share(Joints2D(COCO17, kp, 0, 0), segment) == pytest.approx(want)

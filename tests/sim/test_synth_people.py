@@ -16,7 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from conftest import MAKEHUMAN, MOCAP, needs_assets
+from conftest import MAKEHUMAN, MOCAP, needs_assets, synthesize_scene
 
 from swarmpose.body.kinematics import axis_angle_matrix, quaternion_to_matrix
 from swarmpose.body.loader import load_body
@@ -41,10 +41,7 @@ MARGIN = 0.05
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("people")
-    people = load_people([parse_person_spec(p) for p in PEOPLE], FRAMES, 30.0)
-    synthesize_people(people, out, SynthConfig(frames=FRAMES, camera_distance=3.5, seed=2), progress=False)
-    return out
+    return synthesize_scene(tmp_path_factory.mktemp("people"), PEOPLE, FRAMES, seed=2)
 
 
 @cache

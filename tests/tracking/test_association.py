@@ -89,16 +89,3 @@ def test_a_body_following_a_hidden_person_is_no_false_positive():
     assert r["matched"] == {2: {0: 6}}
     assert score_people({0: [TruePerson(1, joints, visible=0.0)]}, {})["mota"] is None  # nobody to find
 
-
-def test_the_depth_agreement_skips_pixels_other_people_hide_only_when_asked():
-    from types import SimpleNamespace
-
-    from swarmpose.tracking.verdict import judge
-
-    objective = SimpleNamespace(uses_joints=False, has_depth=True, weights=SimpleNamespace(depth=1.0))
-    # 100 model pixels, 40 over pixels without a measurement (another person removed), 50 of the 60 others agree
-    counts = {"rendered": np.array([100]), "both": np.array([60]), "close": np.array([50])}
-    state, reason = judge(objective, counts, None, {}, "tracking", 0.12, 0.6)
-    assert state == "lost" and "50 %" in reason  # 50 / 100 < 0.6
-    state, _ = judge(objective, counts, None, {}, "tracking", 0.12, 0.6, observed_only=True)
-    assert state == "tracking"  # 50 / 60 >= 0.6

@@ -240,3 +240,23 @@ def test_device_joint_terms_match_the_numpy_oracle(body, scene, label_swaps):
     objective.set_targets(JointTargets.empty())
     objective(hs)
     assert not objective.last_parts["E_J2D"].any() and not objective.last_parts["E_J3D"].any()
+
+
+def test_the_depth_agreement_skips_pixels_other_people_hide_only_when_asked(body, scene):
+    """The true pose on a depth whose lower body was taken out (another person in front,
+    removed): counted over every model pixel it is lost, over the observed ones it is not."""
+    from swarmpose.tracking.verdict import judge
+
+    h, depth = scene
+    box = box_around(INTR.project(body.pose(h[None])[0]), margin=0.15)
+    hidden = depth.copy()
+    hidden[int(INTR.project(body.posed_points(h[None], ("left_hip",))[0])[0, 1]):] = 0.0  # below the hips
+    objective = Objective(body, INTR, ParticleScorer(body, INTR, (64, 64)), ObjectiveWeights(depth=1.0, joints=0.0))
+    objective.set_frame(hidden, box, JointTargets.empty(), h)
+    _, _, counts = objective.scorer.render_and_score(h[None])
+    rendered, both, close = (int(counts[k][0]) for k in ("rendered", "both", "close"))
+    assert both < 0.7 * rendered and close > 0.9 * both  # the hidden legs render over no measurement
+    state, reason = judge(objective, counts, JointTargets.empty(), {}, "tracking", 0.12, 0.75)
+    assert state == "lost" and f"{100 * close / rendered:.0f} %" in reason
+    state, _ = judge(objective, counts, JointTargets.empty(), {}, "tracking", 0.12, 0.75, observed_only=True)
+    assert state == "tracking"
