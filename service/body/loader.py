@@ -1,7 +1,9 @@
 """Resolve a ``--body`` / ``--shape`` pair to a :class:`SkinnedBody`.
 
 ``BODY`` is ``builtin`` (the parametric body; ``--shape`` a preset or ``height=..,torso=..``),
-``makehuman:DIR`` (the MakeHuman assets directory; ``--shape`` a MakeHuman preset) or a
+``makehuman:DIR`` (the MakeHuman assets directory; ``--shape`` a MakeHuman preset, or macro
+sliders ``gender=0.3,weight=0.8,...`` after an optional preset, see
+:mod:`swarmpose.body.makehuman_macros`) or a
 ``.glb`` / ``.gltf`` file (``--shape`` ignored: the file is already personalised).
 
 Imports inside the functions are deliberate: each body module is imported when its spec is
@@ -25,8 +27,13 @@ def load_body(body: str, shape: str | None = None) -> SkinnedBody:
         from swarmpose.body.parametric_shape import parse_shape
         return build_parametric_body(parse_shape(shape or DEFAULT_SHAPE["builtin"]))
     if body.startswith("makehuman:"):
+        directory = str(Path(body.split(":", 1)[1]).expanduser())
+        if shape and "=" in shape:  # macro sliders, optionally after a preset: a personalised shape
+            from swarmpose.body.makehuman_macros import parse_macros
+            from swarmpose.body.shape_space import MakeHumanSpace
+            return MakeHumanSpace(directory).full_body(parse_macros(shape).vector())
         from swarmpose.body.makehuman import load_makehuman
-        return load_makehuman(str(Path(body.split(":", 1)[1]).expanduser()), shape or DEFAULT_SHAPE["makehuman"])
+        return load_makehuman(directory, shape or DEFAULT_SHAPE["makehuman"])
     if body.lower().endswith((".glb", ".gltf")):
         from swarmpose.body.gltf_read import load_glb
         return load_glb(Path(body).expanduser())

@@ -16,6 +16,7 @@ Left/RightFoot the ankles; LHipJoint/RHipJoint, Head, hands, fingers and toes ar
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
@@ -113,8 +114,9 @@ def _read_obj(path: str) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     return np.asarray(verts, dtype=np.float64), arrays
 
 
+@lru_cache(maxsize=64)
 def _read_target(path: Path, n_vertices: int) -> np.ndarray:
-    """A dense (N, 3) displacement in decimetres from a .target file."""
+    """A dense (N, 3) displacement in decimetres from a .target file (cached, read-only)."""
     try:
         data = np.loadtxt(path, comments="#", ndmin=2)
     except (OSError, ValueError) as exc:
@@ -124,6 +126,7 @@ def _read_target(path: Path, n_vertices: int) -> np.ndarray:
         if data.shape[1] != 4:
             raise AssetError(f"{path}: expected lines 'vertex dx dy dz', found {data.shape[1]} columns")
         out[data[:, 0].astype(np.int64)] = data[:, 1:4]
+    out.setflags(write=False)
     return out
 
 
@@ -175,6 +178,68 @@ def resolve_targets(preset: str) -> dict[str, float]:
     return PRESETS[preset]
 
 
+@dataclass(frozen=True, eq=False)
+class _RigAssets:
+    """What every shape of the MakeHuman body shares: the rig's bone order and parents, the
+    body group's triangles and the sparse skin (the weights do not depend on the shape)."""
+
+    names: list[str]
+    rig: dict
+    parents: np.ndarray
+    body_faces: np.ndarray
+    used: np.ndarray
+    skin_idx: np.ndarray
+    skin_w: np.ndarray
+
+
+@lru_cache(maxsize=4)
+def _rig_assets(directory: str) -> _RigAssets:
+    root = Path(directory)
+    all_verts, groups = _read_obj(str(root / "base.obj"))
+    try:
+        rig = json.loads((root / RIG_FILE).read_text())
+        weights = json.loads((root / WEIGHTS_FILE).read_text())["weights"]
+    except (OSError, ValueError, KeyError) as exc:
+        raise AssetError(f"cannot read the cmu_mb rig in {root / 'rigs'}: {exc}") from exc
+    names = _topological(rig)
+    index = {n: i for i, n in enumerate(names)}
+    parents = np.array([index[rig[n]["parent"]] if rig[n].get("parent") else -1 for n in names])
+    body_faces = _triangulate(groups["body"])
+    used = np.unique(body_faces)
+    remap = np.full(len(all_verts), -1, dtype=np.int64)
+    remap[used] = np.arange(len(used))
+    dense = np.zeros((len(all_verts), len(names)))
+    for bone, pairs in weights.items():
+        if bone not in index:
+            raise AssetError(f"weights name bone {bone!r}, which the rig lacks")
+        arr = np.asarray(pairs, dtype=np.float64).reshape(-1, 2)
+        dense[arr[:, 0].astype(np.int64), index[bone]] = arr[:, 1]
+    skin_idx, skin_w = sparse_skin(dense[used], len(used))
+    return _RigAssets(names, rig, parents, remap[body_faces].astype(np.int32), used, skin_idx, skin_w)
+
+
+def _check_directory(root: Path) -> None:
+    if not (root / "base.obj").is_file():
+        raise AssetError(f"no base.obj in {root}; pass the MakeHuman assets directory "
+                         "(shared/assets/bodies/makehuman)")
+
+
+def shaped_vertices(directory: str | Path, recipe: dict[str, float]) -> np.ndarray:
+    """Every vertex of base.obj (N, 3), decimetres, with the targets of ``recipe`` ({target path
+    below targets/macrodetails, no suffix: weight}) added."""
+    root = Path(directory)
+    _check_directory(root)
+    verts = _read_obj(str(root / "base.obj"))[0].copy()
+    for target, weight in recipe.items():
+        if weight == 0:
+            continue
+        path = root / TARGET_DIR / f"{target}.target"
+        if not path.is_file():
+            raise AssetError(f"target {path} is missing from the MakeHuman assets")
+        verts += weight * _read_target(path, len(verts))
+    return verts
+
+
 @lru_cache(maxsize=16)
 def load_makehuman(directory: str | Path, preset: str = "neutral") -> SkinnedBody:
     """The MakeHuman body in ``directory`` shaped by ``preset`` (see :data:`PRESETS`).
@@ -182,54 +247,34 @@ def load_makehuman(directory: str | Path, preset: str = "neutral") -> SkinnedBod
     Returns a :class:`SkinnedBody` in metres in the body frame, root (Hips head) at the
     origin, 13,380 vertices, 26,756 triangles, 31 bones, ≤ 4 influences per vertex.
     """
-    root = Path(directory)
     recipe = resolve_targets(preset)
-    if not (root / "base.obj").is_file():
-        raise AssetError(f"no base.obj in {root}; pass the MakeHuman assets directory "
-                         "(shared/assets/bodies/makehuman)")
-    all_verts, groups = _read_obj(str(root / "base.obj"))
-    verts = all_verts.copy()
-    for target, weight in recipe.items():
-        path = root / TARGET_DIR / f"{target}.target"
-        if not path.is_file():
-            raise AssetError(f"target {path} is missing from the MakeHuman assets")
-        verts += weight * _read_target(path, len(verts))
+    return makehuman_body(directory, recipe, f"makehuman:{preset}", {"preset": preset})
+
+
+def makehuman_body(directory: str | Path, recipe: dict[str, float], name: str,
+                   metadata: dict | None = None) -> SkinnedBody:
+    """The MakeHuman body in ``directory`` with the targets of ``recipe`` ({target: weight}) applied,
+    named ``name``; ``metadata`` is added to the body's own (source, directory, targets)."""
+    root = Path(directory)
+    verts = shaped_vertices(root, recipe)
+    groups = _read_obj(str(root / "base.obj"))[1]
+    assets = _rig_assets(str(root))
+    names, rig = assets.names, assets.rig
+    index = {n: i for i, n in enumerate(names)}
 
     def centroid(cube: str) -> np.ndarray:
         if cube not in groups:
             raise AssetError(f"base.obj has no joint cube group {cube!r}")
         return verts[np.unique(groups[cube])].mean(axis=0)
 
-    try:
-        rig = json.loads((root / RIG_FILE).read_text())
-        weights = json.loads((root / WEIGHTS_FILE).read_text())["weights"]
-    except (OSError, ValueError, KeyError) as exc:
-        raise AssetError(f"cannot read the cmu_mb rig in {root / 'rigs'}: {exc}") from exc
-
-    names = _topological(rig)
-    index = {n: i for i, n in enumerate(names)}
     heads = np.stack([_locate(rig[n]["head"], centroid, verts, n) for n in names])
     tails = np.stack([_locate(rig[n]["tail"], centroid, verts, n) for n in names])
-    parents = np.array([index[rig[n]["parent"]] if rig[n].get("parent") else -1 for n in names])
-
-    body_faces = _triangulate(groups["body"])
-    used = np.unique(body_faces)
-    remap = np.full(len(verts), -1, dtype=np.int64)
-    remap[used] = np.arange(len(used))
-    dense = np.zeros((len(verts), len(names)))
-    for bone, pairs in weights.items():
-        if bone not in index:
-            raise AssetError(f"weights name bone {bone!r}, which the rig lacks")
-        arr = np.asarray(pairs, dtype=np.float64).reshape(-1, 2)
-        dense[arr[:, 0].astype(np.int64), index[bone]] = arr[:, 1]
-    skin_idx, skin_w = sparse_skin(dense[used], len(used))
-
     origin = heads[index["Hips"]].copy()
 
     def to_body(p: np.ndarray) -> np.ndarray:
         return (p - origin) * DECIMETRE
 
-    body_verts = to_body(verts[used])
+    body_verts = to_body(verts[assets.used])
     heads_m = to_body(heads)
 
     points: dict[str, tuple[str, np.ndarray]] = {}
@@ -241,22 +286,22 @@ def load_makehuman(directory: str | Path, preset: str = "neutral") -> SkinnedBod
     points["head"] = ("Head", 0.5 * (heads_m[index["Head"]] + to_body(tails[index["Head"]])))
     points["mid_hip"] = ("Hips", 0.5 * (heads_m[index["LeftUpLeg"]] + heads_m[index["RightUpLeg"]]))
     eyes = (to_body(centroid("joint-l-eye")), to_body(centroid("joint-r-eye")))
-    for name, pos in face_landmarks(body_verts, points["head"][1], points["neck"][1], eyes).items():
-        points[name] = ("Head", pos)
-    for name, pos in foot_landmarks(body_verts, points["left_ankle"][1], points["right_ankle"][1]).items():
-        points[name] = (("LeftFoot" if name.startswith("left") else "RightFoot"), pos)
+    for point_name, pos in face_landmarks(body_verts, points["head"][1], points["neck"][1], eyes).items():
+        points[point_name] = ("Head", pos)
+    for point_name, pos in foot_landmarks(body_verts, points["left_ankle"][1], points["right_ankle"][1]).items():
+        points[point_name] = (("LeftFoot" if point_name.startswith("left") else "RightFoot"), pos)
 
     bone_joint = np.array([JOINT_INDEX[TRACKING_BONES[n][0]] if n in TRACKING_BONES else -1 for n in names])
     bone_fraction = np.array([TRACKING_BONES[n][1] if n in TRACKING_BONES else 0.0 for n in names])
     point_names = tuple(points)
     return SkinnedBody(
-        name=f"makehuman:{preset}",
+        name=name,
         vertices=body_verts,
-        triangles=remap[body_faces].astype(np.int32),
-        skin_indices=skin_idx,
-        skin_weights=skin_w,
+        triangles=assets.body_faces,
+        skin_indices=assets.skin_idx,
+        skin_weights=assets.skin_w,
         bone_names=tuple(names),
-        bone_parents=parents,
+        bone_parents=assets.parents,
         bone_heads=heads_m,
         bind_matrices=body_frame_bind_matrices(heads_m),
         bone_joint=bone_joint,
@@ -264,5 +309,5 @@ def load_makehuman(directory: str | Path, preset: str = "neutral") -> SkinnedBod
         point_names=point_names,
         point_bones=np.array([index[points[p][0]] for p in point_names]),
         point_rest=np.stack([points[p][1] for p in point_names]),
-        metadata={"source": "makehuman", "directory": str(root), "preset": preset, "targets": dict(recipe)},
+        metadata={"source": "makehuman", "directory": str(root), "targets": dict(recipe), **(metadata or {})},
     )

@@ -16,6 +16,7 @@ from swarmpose import __version__
 from swarmpose.cli.bench import add_bench_commands
 from swarmpose.cli.common import DEFAULTS, verbosity_parent
 from swarmpose.cli.demo import add_demo_command
+from swarmpose.cli.personalize import add_personalize_command
 from swarmpose.cli.probe import add_probe_command
 from swarmpose.cli.serve import add_service_commands
 from swarmpose.cli.subscribe import add_subscribe_command
@@ -40,6 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_probe_command(sub, common)
     add_bench_commands(sub, common)
     add_body_command(sub, common)
+    add_personalize_command(sub, common)
     return parser
 
 

@@ -62,3 +62,7 @@ class ProtocolError(SwarmposeError):
 
 class PublishError(SwarmposeError):
     """zenoh could not be opened or configured (bad endpoint, port taken)."""
+
+
+class PersonalisationError(SwarmposeError):
+    """A body's shape could not be estimated from the recording (no person, too few frames)."""

@@ -128,19 +128,37 @@ class ParticleScorer:
         self.last_timings: dict[str, float] = {}
 
     # ------------------------------------------------------------------ setup
-    def _upload_mesh(self, body: SkinnedBody, tables) -> dict:
-        cl = self._cl
-        mf = cl.mem_flags
+    @staticmethod
+    def _mesh_arrays(body: SkinnedBody, tables) -> dict[str, np.ndarray]:
+        """The device layout of ``body``'s mesh, skin and FK tables."""
         nv = len(body.vertices)
         rest = np.zeros((nv, 4), np.float32)
         rest[:, :3] = body.vertices
         tris = np.zeros((len(body.triangles), 4), np.int32)
         tris[:, :3] = body.triangles
-        arrays = {"rest": rest, "idx": np.ascontiguousarray(body.skin_indices, np.int32),
-                  "w": np.ascontiguousarray(body.skin_weights, np.float32), "tris": tris,
-                  "steps": tables.steps, "links": tables.links, "bone_data": tables.bone_data,
-                  "point_bone": tables.point_bone, "point_rest": tables.point_rest,
-                  "no_observation": np.zeros(1, np.float32)}
+        return {"rest": rest, "idx": np.ascontiguousarray(body.skin_indices, np.int32),
+                "w": np.ascontiguousarray(body.skin_weights, np.float32), "tris": tris,
+                "steps": tables.steps, "links": tables.links, "bone_data": tables.bone_data,
+                "point_bone": tables.point_bone, "point_rest": tables.point_rest}
+
+    def set_body(self, body: SkinnedBody) -> None:
+        """Score ``body`` from now on: another shape of the same topology (vertex, triangle,
+        bone and named-point counts, as :class:`~swarmpose.body.shape_space.ShapeSpace` keeps
+        them). The mesh is copied into the existing buffers: no program is built again."""
+        tables = fk_tables(body)
+        have = (self.defines["NV"], self.defines["NF"], self.defines["NB"], self.point_count)
+        got = (len(body.vertices), len(body.triangles), len(body.bone_names), len(tables.point_bone))
+        if have != got or tables.defines["NJ"] != self.defines["NJ"]:
+            raise ShapeError(f"{body.name}: (vertices, triangles, bones, points) {got} differ from the scorer's "
+                             f"{have}; build a new scorer for another topology")
+        for name, array in self._mesh_arrays(body, tables).items():
+            self._cl.enqueue_copy(self.queue, self._mesh[name], np.ascontiguousarray(array), is_blocking=True)
+        self.body = body
+
+    def _upload_mesh(self, body: SkinnedBody, tables) -> dict:
+        cl = self._cl
+        mf = cl.mem_flags
+        arrays = {**self._mesh_arrays(body, tables), "no_observation": np.zeros(1, np.float32)}
         buffers = {k: cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a) for k, a in arrays.items()}
         npt = len(tables.point_bone)
         for name, size in (("tgt2d", npt * 16), ("tgt3d", npt * 16), ("pairs", max(npt // 2, 1) * 8), ("pen", 32)):

@@ -93,6 +93,19 @@ class BodyTracker:
         """``platform: device`` of the OpenCL device scoring, or "" (lift mode)."""
         return "" if self.objective is None else self.objective.scorer.cl_context.name
 
+    def set_body(self, body: SkinnedBody) -> None:
+        """Track with ``body`` from now on: another shape of this tracker's body with the same
+        tracking topology (a :class:`~swarmpose.body.shape_space.ShapeSpace`'s tracking body).
+        The track goes on from the last pose."""
+        if self.objective is not None:
+            self.objective.set_body(body)
+            if self.objective.coarse is not None:
+                coarse = self.objective.coarse
+                self.objective.coarse = ParticleScorer(body.tracking_lod(self.config.coarse_triangles),
+                                                       self.intrinsics, self.config.coarse_tile,
+                                                       threshold=self.config.threshold_m, context=coarse.cl_context)
+        self.body = body
+
     def reset(self) -> None:
         """Forget the track: the next frame initialises from its detection."""
         self.history.clear()

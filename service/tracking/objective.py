@@ -196,7 +196,18 @@ class Objective:
         self.coarse_normaliser = 1.0
         self.has_depth = False
         self.last_parts: dict[str, np.ndarray] = {}
+        self.last_counts: dict[str, np.ndarray] = {}
         self.spent_s = dict.fromkeys(SPENT_KEYS, 0.0)
+
+    def set_body(self, body: SkinnedBody) -> None:
+        """Score another shape of the same body (same topology; see ``ParticleScorer.set_body``)
+        from now on, on the full-resolution level (a coarse level is the caller's to replace)."""
+        self.scorer.set_body(body)
+        self.body = body
+        self.torso_radius = TORSO_RADIUS_SHARE * float(np.linalg.norm(body.point("left_hip")
+                                                                       - body.point("right_hip")))
+        for scorer in self.levels:
+            scorer.joint_targets_owner = None  # the torso radius travels with the targets
 
     def take_spent(self) -> dict[str, float]:
         """The time accumulated in :attr:`spent_s` since the last take, and a fresh start."""
@@ -324,6 +335,7 @@ class Objective:
         e_p = result.terms["E_P"] if w.penetration > 0 else zeros
         total = w.depth * e_d + w.joints * e_j + w.penetration * e_p
         self.last_parts = {"E": total, "E_D": e_d, "E_J": e_j, "E_J2D": e_2d, "E_J3D": e_3d, "E_P": e_p}
+        self.last_counts = result.counts
         spent = self.spent_s
         spent["score"] += t1 - t0
         spent["joints"] += time.perf_counter() - t1

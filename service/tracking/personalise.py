@@ -1,0 +1,300 @@
+"""Personalisation: the body's shape estimated from the depth and 2D joints of ordinary motion.
+
+Input: samples of one person (a frame, its detection and the pose the tracker found with the
+shape space's start body). :func:`fit_shape` chooses ``keyframes`` well-spread frames, then:
+
+0. **Sweep.** A coarse grid (:data:`SWEEP`: gender × height) of shapes, each with its own pose
+   step, picks the start: poses tracked with the start body favour shapes like it.
+1. **Shape step.** A PSO over the space's parameters (:class:`~swarmpose.body.shape_space.ShapeSpace`)
+   with the poses held, minimising the mean over the key frames of ``w_D·(E_D + E_S) + w_J·E_J``
+   (the tracker's objective with its own weights, plus the silhouette term E_S below), plus
+   ``w_B·E_B``, the bone-length term below. Each frame's root may move by one of
+   :data:`ROOT_OFFSETS_M` per candidate (a taller body moves its hips). Each candidate shape is
+   a buffer upload into one scorer per key frame (same topology), each scorer keeping its
+   frame's observation for the whole fit.
+2. **Pose step.** Every key frame's pose is refitted with the new shape by the tracker's own
+   per-frame search (``pose_steps`` times), started from the frame's last pose.
+
+Steps 1 and 2 alternate for ``rounds`` rounds.
+
+E_S, the silhouette term: the depth term ignores pixels without an observation, which on depth
+whose background is removed (UTD-MHAD, a segmented person) lets a body grow for free. E_S
+charges T for every rendered pixel of the tile with no observation, normalised like E_D (cm).
+
+E_B, the bone-length term: the poses held during a shape step were fitted with the previous
+shape, and a body too short can bend and lean to explain them (female-tall came out 5 cm short
+with E alone, though E with the true poses prefers the true shape). The distance between two
+lifted joints of one limb does not depend on the pose, so E_B compares the median of each limb's
+observed length over all samples with the candidate's rest length (mean difference, cm).
+
+Key frames are chosen by farthest-point sampling of the tracked poses' joint angles and root
+orientation, so that the fit sees the limbs in different configurations.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from swarmpose.body.kinematics import quaternion_to_matrix
+from swarmpose.body.shape_space import ShapeSpace
+from swarmpose.body.skinned import SkinnedBody
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import PersonalisationError
+from swarmpose.detect.joints import Joints2D
+from swarmpose.gpu.context import ClContext
+from swarmpose.gpu.scorer import ParticleScorer
+from swarmpose.sources.base import Frame
+from swarmpose.tracking.body_tracker import BodyTracker
+from swarmpose.tracking.config import TrackerConfig
+from swarmpose.tracking.objective import JointTargets, Objective
+from swarmpose.tracking.pso import PsoConfig, minimise
+
+log = logging.getLogger(__name__)
+
+MIN_FRAMES = 3
+"""Fewest tracked frames a fit accepts."""
+
+
+@dataclass(frozen=True)
+class ShapeSample:
+    """One frame of the person: the frame, its detection (None: none) and the pose (36,)
+    the tracker found for it with the start body."""
+
+    frame: Frame
+    joints: Joints2D | None
+    pose: np.ndarray
+
+
+LIMB_BONES = tuple((f"{side}_{a}", f"{side}_{b}") for side in ("left", "right")
+                   for a, b in (("shoulder", "elbow"), ("elbow", "wrist"), ("hip", "knee"), ("knee", "ankle"),
+                                ("shoulder", "hip")))
+"""Point pairs whose distance is a bone's length, whatever the pose (E_B)."""
+BONE_WEIGHT = 5.0
+"""w_B: the bone-length term's weight per cm of mean difference."""
+
+
+SWEEP = {"gender": (0.0, 1.0), "height": (0.2, 0.5, 0.8)}
+"""Stage 0's grid (see :func:`_sweep`); the built-in body's height is in metres."""
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """How hard :func:`fit_shape` works: key frames, alternation rounds, the shape PSO's
+    particles and generations, the depth tile of the fit (finer than tracking's: it runs
+    once) and the seed."""
+
+    keyframes: int = 12
+    rounds: int = 3
+    particles: int = 16
+    generations: int = 16
+    tile: tuple[int, int] = (96, 96)
+    seed: int = 0
+    pose_steps: int = 2
+    bone_weight: float = BONE_WEIGHT
+    sweep: dict[str, tuple[float, ...]] = field(default_factory=lambda: dict(SWEEP))
+
+
+@dataclass
+class ShapeFit:
+    """The result: parameters ``x`` (D,) and by name, the full-resolution and tracking bodies,
+    the frames used (indices into the samples), the energy after each round, and seconds."""
+
+    x: np.ndarray
+    parameters: dict[str, float]
+    body: SkinnedBody
+    tracking_body: SkinnedBody
+    keyframes: list[int]
+    energy: list[float] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+def observed_bone_lengths(samples: Sequence[ShapeSample], body: SkinnedBody, intrinsics: Intrinsics,
+                          min_score: float) -> dict[tuple[str, str], float]:
+    """The median over ``samples`` of the distance (m) between the lifted joints J^e of each
+    :data:`LIMB_BONES` pair detected with depth at both ends (pairs seen in fewer than 3 frames
+    are left out)."""
+    seen: dict[tuple[str, str], list[float]] = {b: [] for b in LIMB_BONES}
+    for sample in samples:
+        depth = np.asarray(sample.frame.depth, np.float32)
+        depth = np.where(np.isfinite(depth) & (depth > 0), depth, np.float32(0.0))
+        targets = JointTargets.from_detection(sample.joints, depth, intrinsics, body, min_score)
+        where = {n: p for n, p in zip(targets.names, targets.xyz) if np.all(np.isfinite(p))}
+        for a, b in LIMB_BONES:
+            if a in where and b in where:
+                seen[(a, b)].append(float(np.linalg.norm(where[a] - where[b])))
+    return {bone: float(np.median(v)) for bone, v in seen.items() if len(v) >= 3}
+
+
+def bone_energy(body: SkinnedBody, observed: dict[tuple[str, str], float]) -> float:
+    """E_B: mean |model bone length - observed| in cm over the observed bones (0 with none)."""
+    if not observed:
+        return 0.0
+    diffs = [abs(float(np.linalg.norm(body.point(a) - body.point(b))) - length) for (a, b), length in observed.items()]
+    return 100.0 * float(np.mean(diffs))
+
+
+def spread_frames(poses: Sequence[np.ndarray], count: int) -> list[int]:
+    """Indices of ``count`` poses (36,) spread out by farthest-point sampling over the joint
+    angles and the root quaternion (rad / unitless), starting from the first."""
+    if len(poses) <= count:
+        return list(range(len(poses)))
+    feats = np.stack([np.concatenate([p[3:7], p[7:]]) for p in poses])
+    chosen = [0]
+    dist = np.linalg.norm(feats - feats[0], axis=1)
+    while len(chosen) < count:
+        k = int(np.argmax(dist))
+        chosen.append(k)
+        dist = np.minimum(dist, np.linalg.norm(feats - feats[k], axis=1))
+    return sorted(chosen)
+
+
+class _KeyFrame:
+    """One key frame's objective, on a scorer of its own that keeps the frame's observation."""
+
+    def __init__(self, sample: ShapeSample, body: SkinnedBody, intrinsics: Intrinsics, config: TrackerConfig,
+                 tile: tuple[int, int], context: ClContext, tracker: BodyTracker):
+        self.sample, self.pose = sample, np.asarray(sample.pose, float)
+        scorer = ParticleScorer(body, intrinsics, tile, threshold=config.threshold_m, context=context)
+        self.objective = Objective(body, intrinsics, scorer, config.weights)
+        depth = np.asarray(sample.frame.depth, np.float32)
+        self.depth = np.where(np.isfinite(depth) & (depth > 0), depth, np.float32(0.0))
+        targets = JointTargets.from_detection(sample.joints, self.depth, intrinsics, body, config.min_score)
+        self.objective.set_frame(self.depth, tracker._box(self.pose, targets), targets, self.pose)
+        self.threshold = config.threshold_m
+
+    def energy(self, body: SkinnedBody) -> float:
+        """The least E + w_D·E_S of this frame's pose with ``body`` over the root offsets of
+        :data:`ROOT_OFFSETS_M` (see the module docstring)."""
+        self.objective.set_body(body)
+        poses = np.repeat(self.pose[None], len(ROOT_OFFSETS_M), axis=0)
+        up = quaternion_to_matrix(self.pose[3:7])[:, 1]
+        poses[:, :3] += ROOT_OFFSETS_M[:, :1] * up + ROOT_OFFSETS_M[:, 1:2] * np.array([0.0, 0.0, 1.0])
+        total = np.asarray(self.objective(poses), float)
+        if self.objective.uses_depth:
+            counts = self.objective.last_counts
+            unobserved = (counts["rendered"] - counts["both"]).astype(float)
+            e_s = 100.0 * self.threshold * unobserved / self.objective.normaliser
+            total = total + self.objective.weights.depth * e_s
+        best = int(np.argmin(total))
+        self.best_pose = poses[best]
+        return float(total[best])
+
+
+ROOT_OFFSETS_M = np.array([(u, z) for u in (-0.06, -0.03, 0.0, 0.03, 0.06) for z in (-0.03, 0.0, 0.03)])
+"""(K, 2) root offsets tried per key frame and candidate shape: along the body's up axis and the
+camera's depth axis, m. A taller or shorter body moves its hips; holding the root where the start
+body had it would tie the fit to the start shape (female-tall came out 5.6 cm short)."""
+
+
+def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Intrinsics, config: TrackerConfig,
+              settings: FitSettings = FitSettings(), context: ClContext | None = None,
+              progress: Callable[[str], None] | None = None) -> ShapeFit:
+    """The shape of the person in ``samples`` (see the module docstring). ``config``: the
+    tracker's settings (its weights, search budget and device); PersonalisationError when
+    fewer than :data:`MIN_FRAMES` samples have a pose."""
+    t0 = time.perf_counter()
+    usable = [s for s in samples if s.pose is not None and np.all(np.isfinite(s.pose))]
+    if len(usable) < MIN_FRAMES:
+        raise PersonalisationError(f"only {len(usable)} of {len(samples)} frames were tracked (at least {MIN_FRAMES} "
+                                   "needed): is a person in view, is the detector right for the source? Pass more "
+                                   "frames (--frames) or a recording where the whole body is seen")
+    if config.mode == "lift":
+        raise PersonalisationError("the lift mode fits no body; personalise with mode hybrid, depth or joints")
+    config = replace(config, max_people=1, coarse_share=0.0)
+    context = context or ClContext.for_spec(config.device)
+    x = space.start
+    body = space.tracking_body(x)
+    tracker = BodyTracker(body, intrinsics, config, context)
+    chosen = spread_frames([s.pose for s in usable], settings.keyframes)
+    keys = [_KeyFrame(usable[k], body, intrinsics, config, settings.tile, context, tracker) for k in chosen]
+    rng = np.random.default_rng(settings.seed)
+    pso = PsoConfig(particles=settings.particles, generations=settings.generations, variant="canonical")
+    span = space.upper - space.lower
+
+    bones = observed_bone_lengths(usable, body, intrinsics, config.min_score) if settings.bone_weight > 0 else {}
+
+    def energy_of(shaped: SkinnedBody) -> float:
+        return (sum(k.energy(shaped) for k in keys) / len(keys)
+                + settings.bone_weight * bone_energy(shaped, bones))
+
+    def shape_energy(candidates: np.ndarray) -> np.ndarray:
+        return np.array([energy_of(space.tracking_body(cand)) for cand in candidates])
+
+    def refit(shaped: SkinnedBody) -> float:
+        """The pose step: every key frame's pose refitted with ``shaped`` by the tracker's own
+        search from the best root offset of its last pose; returns the mean shape energy."""
+        tracker.set_body(shaped)
+        for key in keys:
+            key.energy(shaped)
+            pose = key.best_pose
+            for _ in range(settings.pose_steps):
+                tracker.reset()
+                tracker.previous, tracker.history = pose, [pose]
+                result = tracker.step(key.sample.frame, key.sample.joints)
+                if result.pose is not None and result.state != "lost":
+                    pose = np.asarray(result.pose, float)
+            key.pose = pose
+        return energy_of(shaped)
+
+    x, first = _sweep(space, keys, refit, settings.sweep)
+    if progress is not None:
+        progress(f"sweep: start {', '.join(f'{k} {v:.3f}' for k, v in space.parameters(x).items())} "
+                 f"(energy {first:.2f})")
+    energies: list[float] = [first]
+    body = space.tracking_body(x)
+    for round_ in range(settings.rounds):
+        start = np.clip(x + rng.normal(0.0, 0.15 / (1 + round_), (pso.particles, len(x))) * span,
+                        space.lower, space.upper)
+        start[0] = x
+        best = minimise(shape_energy, start, space.lower, space.upper, rng, pso)
+        x = space.clip(best.best)
+        body = space.tracking_body(x)
+        energies.append(refit(body))
+        if progress is not None:
+            progress(f"round {round_ + 1}/{settings.rounds}: energy {best.value:.2f}, "
+                     + ", ".join(f"{k} {v:.3f}" for k, v in space.parameters(x).items()))
+    full = space.full_body(x)
+    return ShapeFit(x, space.parameters(x), full, body, [usable.index(k.sample) for k in keys], energies,
+                    time.perf_counter() - t0)
+
+
+def _sweep(space: ShapeSpace, keys: list[_KeyFrame], refit: Callable[[SkinnedBody], float],
+           grid: dict[str, tuple[float, ...]]) -> tuple[np.ndarray, float]:
+    """Stage 0: the start shape with each combination of ``grid``'s values ({parameter: values};
+    parameters the space lacks are skipped), each with its own pose refit, so that poses tracked
+    with the start body do not tie the fit to it. Returns the best parameters and their energy;
+    the key frames keep the best candidate's poses."""
+    import itertools
+
+    axes = [(space.names.index(n), v) for n, v in grid.items() if n in space.names]
+    candidates = [space.start]
+    for combo in itertools.product(*(v for _, v in axes)):
+        x = space.start
+        for (i, _), value in zip(axes, combo):
+            x[i] = value
+        candidates.append(space.clip(x))
+    initial = [k.pose for k in keys]
+    best, best_energy, best_poses = candidates[0], np.inf, initial
+    for x in candidates:
+        for k, pose in zip(keys, initial):
+            k.pose = pose
+        energy = refit(space.tracking_body(x))
+        if energy < best_energy:
+            best, best_energy, best_poses = x, energy, [k.pose for k in keys]
+    for k, pose in zip(keys, best_poses):
+        k.pose = pose
+    return best, float(best_energy)
+
+
+def body_measures(body: SkinnedBody) -> dict[str, float]:
+    """``height_m`` (vertical extent of the rest mesh) and ``volume_l`` (enclosed volume of the
+    rest mesh, litres, through trimesh) of ``body``."""
+    import trimesh
+
+    mesh = trimesh.Trimesh(np.asarray(body.vertices), np.asarray(body.triangles), process=False)
+    return {"height_m": round(body.height, 4), "volume_l": round(abs(float(mesh.volume)) * 1000.0, 2)}

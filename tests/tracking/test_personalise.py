@@ -1,0 +1,91 @@
+"""Personalisation: key frames, the bone-length term, and a whole fit on a synthetic subject
+whose true shape is known (the oracle: the subject's own MakeHuman body)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import MAKEHUMAN, MOCAP, needs_assets
+
+from swarmpose.tracking.personalise import bone_energy, spread_frames
+
+
+def test_key_frames_are_spread_over_the_poses():
+    poses = np.zeros((10, 36))
+    poses[:, 3] = 1.0
+    poses[:5, 7] = np.linspace(0.0, 0.04, 5)   # five nearly equal poses
+    poses[5:, 7] = np.linspace(1.0, 2.0, 5)    # five far apart
+    chosen = spread_frames(list(poses), 3)
+    assert chosen == [0, 5, 9]
+    assert spread_frames(list(poses[:2]), 5) == [0, 1]
+
+
+@needs_assets
+def test_bone_energy_is_the_mean_length_difference_in_cm():
+    from swarmpose.body.loader import load_body
+
+    body = load_body(f"makehuman:{MAKEHUMAN}", "male")
+    exact = {(a, b): float(np.linalg.norm(body.point(a) - body.point(b)))
+             for a, b in (("left_shoulder", "left_elbow"), ("right_knee", "right_ankle"))}
+    assert bone_energy(body, exact) == pytest.approx(0.0, abs=1e-9)
+    off = {bone: length + (0.01 if i == 0 else -0.03) for i, (bone, length) in enumerate(exact.items())}
+    assert bone_energy(body, off) == pytest.approx(2.0)  # (1 cm + 3 cm) / 2
+    assert bone_energy(body, {}) == 0.0
+
+
+@pytest.fixture(scope="module")
+def tall_walk(tmp_path_factory):
+    if not MAKEHUMAN.is_dir():
+        pytest.skip(f"MakeHuman assets not found at {MAKEHUMAN}")
+    from swarmpose.cli.main import main
+
+    out = tmp_path_factory.mktemp("tall")
+    assert main(["synth", "--body", f"makehuman:{MAKEHUMAN}", "--shape", "male-tall", "--motion",
+                 str(MOCAP / "bvh11_131_01.bvh"), "--frames", "16", "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+@needs_assets
+def test_personalize_recovers_a_tall_subjects_height_and_writes_a_body_that_loads(tall_walk, tmp_path, capsys):
+    """The start body is 1.68 m; the subject 1.93 m. On this test's small budget (16 frames,
+    p = g = 24, 2 rounds) the fit must land within 4 cm of the true height and 12 % of the volume (the start
+    body is 25 cm and about 25 % off)
+    (the issue's 2 cm / 5 % goal is measured at the defaults by scripts/bench-personalise.sh),
+    and the GLB must load as --body with its parameters."""
+    from swarmpose.body.loader import load_body
+    from swarmpose.cli.main import main
+    from swarmpose.tracking.personalise import body_measures
+
+    glb = tmp_path / "me.glb"
+    code = main(["personalize", str(tall_walk), "--body", f"makehuman:{MAKEHUMAN}", "--frames", "16",
+                 "--particles", "24", "--generations", "24", "--keyframes", "8", "--rounds", "2",
+                 "--out", str(glb), "--json", "--quiet"])
+    assert code == 0
+    report = json.loads(capsys.readouterr().out)
+    truth = body_measures(load_body(f"makehuman:{MAKEHUMAN}", "male-tall"))
+    fitted = load_body(str(glb))
+    assert abs(fitted.height - truth["height_m"]) < 0.04, (fitted.height, truth)
+    assert report["height_m"] == pytest.approx(fitted.height, abs=1e-3)
+    assert abs(report["volume_l"] / truth["volume_l"] - 1) < 0.12, (report["volume_l"], truth)
+    assert fitted.metadata["personalised"]["parameters"] == report["parameters"]
+    assert set(report["parameters"]) == {"gender", "caucasian", "muscle", "weight", "height"}
+
+
+@needs_assets
+def test_personalize_refuses_a_fixed_body_and_a_recording_without_a_person(tall_walk, tmp_path, capsys):
+    from swarmpose.cli.main import main
+
+    assert main(["personalize", str(tall_walk), "--body", str(tmp_path / "x.glb"), "--out",
+                 str(tmp_path / "me.glb"), "--quiet"]) == 2
+    assert "no shape parameters" in capsys.readouterr().err
+    mkv = MAKEHUMAN.parents[1] / "rgbd" / "azure_kinect_one_frame" / "recording.mkv"
+    movenet = MAKEHUMAN.parents[1] / "pose2d" / "movenet_singlepose_lightning.onnx"
+    assert main(["personalize", f"mkv:{mkv}", "--body", f"makehuman:{MAKEHUMAN}", "--detector", f"onnx:{movenet}",
+                 "--frames", "1", "--out", str(tmp_path / "me.glb"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "no person was tracked" in err and not (tmp_path / "me.glb").exists()
+    assert main(["personalize", str(tall_walk), "--body", f"makehuman:{MAKEHUMAN}", "--out",
+                 str(tmp_path / "me.txt"), "--quiet"]) == 2
+    assert ".glb" in capsys.readouterr().err
