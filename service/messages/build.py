@@ -74,9 +74,11 @@ def versions() -> dict[str, str]:
 
 
 def info_message(camera: str, *, intrinsics=None, body=None, body_spec: str = "", source: str = "",
-                 detector: str = "", mode: str = "hybrid", opencl_device: str = "") -> dict:
+                 detector: str = "", mode: str = "hybrid", opencl_device: str = "",
+                 personalisation: dict | None = None) -> dict:
     """A ``swarmpose.info`` message. intrinsics: :class:`~swarmpose.core.camera.Intrinsics` or None
-    (no frame yet); body: the tracking :class:`~swarmpose.body.skinned.SkinnedBody`."""
+    (no frame yet); body: the tracking :class:`~swarmpose.body.skinned.SkinnedBody`;
+    personalisation: ``{"needed", "bodies"}`` with ``--personalize`` (each body's state), else None."""
     intr = None if intrinsics is None else {
         "width": int(intrinsics.width), "height": int(intrinsics.height), "fx": float(intrinsics.fx),
         "fy": float(intrinsics.fy), "cx": float(intrinsics.cx), "cy": float(intrinsics.cy)}
@@ -84,6 +86,8 @@ def info_message(camera: str, *, intrinsics=None, body=None, body_spec: str = ""
                  "height_m": round(float(body.height), 4) if body is not None else 0.0,
                  "bones": len(body.bone_names) if body is not None else 0,
                  "triangles": len(body.triangles) if body is not None else 0}
+    if personalisation is not None:
+        body_info["personalisation"] = personalisation
     limits = {n: [float(lo), float(hi)] for n, (lo, hi) in zip(ANGLE_NAMES, ANGLE_LIMITS)}
     return {"schema": "swarmpose.info", "version": MESSAGE_VERSIONS["info"], "camera": camera, "keys": keys(camera),
             "skeleton": {"joints": list(EVAL_JOINTS), "links": [list(link) for link in EVAL_LINKS], "units": "m",

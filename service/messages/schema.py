@@ -16,11 +16,12 @@ import jsonschema
 
 from swarmpose.core.errors import ConfigError, ProtocolError
 
-PROTOCOL_VERSION = 3
+PROTOCOL_VERSION = 4
 """The protocol as a whole; raised whenever one message's version is."""
-MESSAGE_VERSIONS = {"frame": 2, "status": 2, "info": 1}
+MESSAGE_VERSIONS = {"frame": 2, "status": 3, "info": 2}
 """Each message's own version: frame 2 added the optional per-body ``detection``; status 2 the
-optional ``tracker.people`` counts."""
+optional ``tracker.people`` counts; status 3 and info 2 the optional ``personalisation``
+(``tracker.personalisation``, ``body.personalisation``: ``--personalize N``)."""
 SCHEMAS = ("frame", "status", "info")
 CAMERA_ID = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 

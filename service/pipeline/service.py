@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from swarmpose.body.loader import load_body
+from swarmpose.body.shape_space import ShapeSpace, shape_space_for
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.progress import progress_bar
@@ -31,6 +32,7 @@ from swarmpose.sim.scoring import ScoreSink
 from swarmpose.sources.base import Frame, FrameSource
 from swarmpose.sources.registry import open_source
 from swarmpose.tracking.body_tracker import BodyTracker
+from swarmpose.tracking.online_personalise import PersonalisingTracker
 
 
 @dataclass
@@ -59,11 +61,19 @@ class Parts:
         return float(getattr(self.source, "fps", 0.0) or 30.0)
 
 
-def make_pipeline(body: SkinnedBody, detector: Detector, config: ServiceConfig) -> FramePipeline:
-    """The per-frame step tracking ``body`` with ``detector`` under ``config.tracker``."""
-    return FramePipeline(detector,
-                         lambda intrinsics, body_id: BodyTracker(body, intrinsics, config.tracker, body_id=body_id),
-                         config.tracker.max_people, config.tracker.retire_frames)
+def make_pipeline(body: SkinnedBody, detector: Detector, config: ServiceConfig,
+                  space: ShapeSpace | None = None) -> FramePipeline:
+    """The per-frame step tracking ``body`` with ``detector`` under ``config.tracker``; with a
+    shape ``space`` and ``config.tracker.personalize`` N > 0, each person's tracker personalises
+    its body from that person's first N tracked frames."""
+    t = config.tracker
+    if space is not None and t.personalize > 0:
+        def make(intrinsics, body_id):
+            return PersonalisingTracker(space, t.personalize, intrinsics, t, body_id=body_id)
+    else:
+        def make(intrinsics, body_id):
+            return BodyTracker(body, intrinsics, t, body_id=body_id)
+    return FramePipeline(detector, make, t.max_people, t.retire_frames)
 
 
 def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score: bool = True,
@@ -72,7 +82,14 @@ def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score:
     the replay files there; with ``score`` and a source that has ground truth, a scorer.
     need_ground_truth: ConfigError at once (before any file is written) for a source without."""
     config.require_source()
-    body = load_body(config.body, config.shape or None)
+    space = None
+    if config.tracker.personalize > 0:  # the body is fitted online: track with the space's start body
+        if config.tracker.mode == "lift":
+            raise ConfigError("--personalize needs a body model; the lift mode fits none (use hybrid, depth or joints)")
+        space = shape_space_for(config.body, config.shape, config.tracker.triangles)
+        body = space.tracking_body(space.start)
+    else:
+        body = load_body(config.body, config.shape or None)
     source = open_source(config.source)
     stack.callback(source.close)
     detector = make_detector(config.detector, source)
@@ -83,7 +100,7 @@ def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score:
                           "written by `swarmpose synth`; use `swarmpose track` for other sources")
     triangles = config.tracker.triangles
     tracking_body = body if len(body.triangles) <= triangles else body.tracking_lod(triangles)
-    parts = Parts(config, tracking_body, source, detector, make_pipeline(tracking_body, detector, config))
+    parts = Parts(config, tracking_body, source, detector, make_pipeline(tracking_body, detector, config, space))
     if out:
         recording = open_recording(Path(out), tracking_body, fps=parts.fps, overlay=config.overlay)
         for sink in recording:  # the run closes them; this covers a failure before it starts
@@ -123,7 +140,8 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
     def info() -> dict:
         return info_message(config.camera_id, intrinsics=parts.pipeline.intrinsics, body=parts.body,
                             body_spec=config.body, source=config.source, detector=config.detector,
-                            mode=config.tracker.mode, opencl_device=parts.pipeline.device_name)
+                            mode=config.tracker.mode, opencl_device=parts.pipeline.device_name,
+                            personalisation=personalisation_info(config, parts.pipeline.personalisation))
 
     zenoh = None
     z = config.zenoh
@@ -147,6 +165,13 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
                     status_period_s=config.status_period_s, reopen_s=config.reopen_s, source_uri=uri,
                     detector_spec=config.detector, zenoh_state=zenoh.state if zenoh else None, source=parts.source)
     return worker, parts, zenoh
+
+
+def personalisation_info(config: ServiceConfig, bodies: list[dict]) -> dict | None:
+    """The info message's ``body.personalisation`` (None when ``--personalize`` is off)."""
+    if config.tracker.personalize <= 0:
+        return None
+    return {"needed": config.tracker.personalize, "bodies": bodies}
 
 
 def run_summary(parts: Parts, stats: WorkerStats, seconds: float, worker: Worker) -> dict:

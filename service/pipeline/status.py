@@ -49,6 +49,7 @@ class WorkerStats:
     detector_error: str = ""
     tracker_error: str = ""
     people: dict = field(default_factory=dict)
+    personalisation: dict = field(default_factory=dict)
     keep_all: bool = False
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
@@ -76,6 +77,7 @@ class WorkerStats:
                                                       "detector_errors", "tracker_failures", "last_latency",
                                                       "tracker_state", "detector_error", "tracker_error")}
             counters["people"] = dict(self.people)
+            counters["personalisation"] = dict(self.personalisation)
         return published, latencies, counters
 
 
@@ -101,7 +103,8 @@ def status_message(camera: str, state: str, stats: WorkerStats, period_s: float,
         "source": {"uri": source_uri, "state": source_state},
         "detector": {"spec": detector_spec, "errors": s["detector_errors"], "last_error": s["detector_error"]},
         "tracker": {"state": s["tracker_state"], "failures": s["tracker_failures"], "last_error": s["tracker_error"],
-                    **({"people": s["people"]} if s["people"] else {})},
+                    **({"people": s["people"]} if s["people"] else {}),
+                    **({"personalisation": s["personalisation"]} if s["personalisation"] else {})},
         "zenoh": zenoh or dict(NO_ZENOH), "opencl_device": opencl_device, "errors": errors,
     }
 

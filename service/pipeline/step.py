@@ -113,6 +113,15 @@ class FramePipeline:
             return self.people.device_name
         return "" if self.tracker is None else self.tracker.device_name
 
+    @property
+    def personalisation(self) -> list[dict]:
+        """The personalisation state of each tracked body (``--personalize N``; empty without)."""
+        if self.people is not None:
+            return self.people.personalisation()
+        if self.tracker is not None and hasattr(self.tracker, "personalisation"):
+            return [self.tracker.personalisation()]
+        return []
+
     def detect(self, frame: Frame) -> Detection:
         """2D joints of ``frame``: of each person the depth shows (``max_people`` > 1), else of
         the one person, looking first where the last tracked body was."""

@@ -106,6 +106,10 @@ class BodyTracker:
                                                        threshold=self.config.threshold_m, context=coarse.cl_context)
         self.body = body
 
+    def new_person(self) -> None:
+        """Track another person from the next frame (a tracker reused for a new id)."""
+        self.reset()
+
     def reset(self) -> None:
         """Forget the track: the next frame initialises from its detection."""
         self.history.clear()

@@ -38,6 +38,8 @@ class TrackerConfig:
                                  "crop (1: one person, no segmentation)", minimum=1, maximum=32)
     retire_frames: int = setting(30, "frames a person may go unseen (occluded, crossing) before its id is retired",
                                  minimum=0)
+    personalize: int = setting(0, "personalise the body from each person's first N tracked frames, then lock the "
+                                  "shape (0 = off; needs --body makehuman:DIR)", minimum=0)
     seed: int = setting(0, "PSO seed (a run repeats exactly with the same seed)", minimum=0)
     start_budget: int = setting(64, "the start's PSOs per facing run at least this many particles and generations "
                                     "(once per track)", minimum=1)

@@ -135,6 +135,10 @@ class PeopleTracker:
         for track in list(self.tracks):
             self._retire(track)
 
+    def personalisation(self) -> list[dict]:
+        """Each current track's personalisation state (``--personalize``; empty without)."""
+        return [t.tracker.personalisation() for t in self.tracks if hasattr(t.tracker, "personalisation")]
+
     def _release(self, tracker: BodyTracker) -> None:
         tracker.reset()
         self._spare.append(tracker)
@@ -143,6 +147,7 @@ class PeopleTracker:
         if self._spare:
             tracker = self._spare.pop()
             tracker.body_id = body_id
+            tracker.new_person()
             return tracker
         return self.make_tracker(body_id)
 

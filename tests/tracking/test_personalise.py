@@ -89,3 +89,52 @@ def test_personalize_refuses_a_fixed_body_and_a_recording_without_a_person(tall_
     assert main(["personalize", str(tall_walk), "--body", f"makehuman:{MAKEHUMAN}", "--out",
                  str(tmp_path / "me.txt"), "--quiet"]) == 2
     assert ".glb" in capsys.readouterr().err
+
+
+@needs_assets
+def test_personalize_n_locks_each_bodys_shape_online_and_status_and_info_say_so(tall_walk):
+    """`--personalize 10` on a worker run: statuses go from collecting to locked with the fitted
+    parameters (valid against the schemas), the tracker then tracks with the fitted body, and
+    the info message carries the same state."""
+    from contextlib import ExitStack
+
+    from swarmpose.messages import validate
+    from swarmpose.messages.build import info_message
+    from swarmpose.pipeline.config import ServiceConfig
+    from swarmpose.pipeline.service import open_parts, personalisation_info
+    from swarmpose.pipeline.worker import Worker
+    from swarmpose.sources.registry import open_source
+    from swarmpose.tracking.config import TrackerConfig
+
+    class Collect:
+        def __init__(self):
+            self.frames, self.statuses = [], []
+
+        def frame(self, message, frame):
+            self.frames.append(validate(message))
+
+        def status(self, message):
+            self.statuses.append(validate(message))
+
+        def close(self):
+            pass
+
+    uri = f"folder:{tall_walk}"
+    config = ServiceConfig(source=uri, body=f"makehuman:{MAKEHUMAN}",
+                           tracker=TrackerConfig(personalize=10, particles=16, generations=16, max_people=1))
+    sink = Collect()
+    with ExitStack() as stack:
+        parts = open_parts(config, stack)
+        Worker(lambda: open_source(uri), parts.pipeline, [sink], camera="test", drop_stale=False, source_uri=uri,
+               status_period_s=0.1, source=parts.source).run()
+        states = [s["tracker"].get("personalisation", {}).get("bodies", [{}])[0].get("state") for s in sink.statuses]
+        assert "collecting" in states and states[-1] == "locked", states
+        locked = sink.statuses[-1]["tracker"]["personalisation"]["bodies"][0]
+        assert locked["frames"] == locked["needed"] == 10
+        assert abs(locked["height_m"] - 1.929) < 0.06, locked  # the start body is 1.68 m
+        tracker = parts.pipeline.tracker
+        assert tracker.body.height == pytest.approx(locked["height_m"], abs=0.01)  # tracking LOD of the fit
+        info = validate(info_message("test", body=tracker.body, body_spec=config.body,
+                                     personalisation=personalisation_info(config, parts.pipeline.personalisation)))
+        assert info["body"]["personalisation"]["bodies"][0]["parameters"] == locked["parameters"]
+    assert len(sink.frames) == 16 and all(m["bodies"] for m in sink.frames)

@@ -1,0 +1,88 @@
+"""``--personalize N``: a tracker that personalises its body from its own first N tracked frames.
+
+:class:`PersonalisingTracker` tracks with the shape space's start body, keeps the first N frames
+it tracked (depth and detection; colour is dropped), then fits the shape on them
+(:func:`~swarmpose.tracking.personalise.fit_shape`, in the tracking thread: that frame takes
+the fit's seconds), takes the new body and locks it for the rest of the run. Each person of a
+several-people run has a tracker of their own, so each is personalised on their own frames.
+A fit that fails (too few frames tracked) leaves the start body and says why.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+
+from swarmpose.body.shape_space import ShapeSpace
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import SwarmposeError
+from swarmpose.detect.joints import Joints2D
+from swarmpose.gpu.context import ClContext
+from swarmpose.sources.base import Frame
+from swarmpose.tracking.body_tracker import BodyTracker
+from swarmpose.tracking.config import TrackerConfig
+from swarmpose.tracking.personalise import FitSettings, ShapeSample, body_measures, fit_shape
+from swarmpose.tracking.result import BodyResult
+
+log = logging.getLogger(__name__)
+
+
+class PersonalisingTracker(BodyTracker):
+    """A :class:`BodyTracker` whose body is fitted to the person after ``needed`` tracked frames.
+
+    :meth:`personalisation` reports ``state`` (``collecting``, ``locked`` or ``failed``),
+    ``frames`` collected, ``needed``, and once locked the ``parameters``, ``height_m`` and
+    ``volume_l`` of the fitted body (``reason`` when it failed)."""
+
+    def __init__(self, space: ShapeSpace, needed: int, intrinsics: Intrinsics, config: TrackerConfig | None = None,
+                 context: ClContext | None = None, body_id: int = 0, settings: FitSettings | None = None):
+        config = config or TrackerConfig()
+        super().__init__(space.tracking_body(space.start), intrinsics, config, context, body_id)
+        self.space, self.needed = space, int(needed)
+        self.settings = settings or FitSettings(seed=config.seed)
+        self.samples: list[ShapeSample] = []
+        self.state, self.reason = "collecting", ""
+        self.found: dict = {}
+
+    def new_person(self) -> None:
+        """Another person: the start body again, and a new personalisation."""
+        super().new_person()
+        if self.state != "collecting" or self.samples:
+            self.set_body(self.space.tracking_body(self.space.start))
+        self.samples, self.state, self.reason, self.found = [], "collecting", "", {}
+
+    def step(self, frame: Frame, joints: Joints2D | None, others_removed: bool = False) -> BodyResult:
+        result = super().step(frame, joints, others_removed)
+        if self.state == "collecting" and result.state != "lost" and result.pose is not None:
+            self.samples.append(ShapeSample(replace(frame, color=None), joints, result.pose))
+            if len(self.samples) >= self.needed:
+                self._personalise()
+        return result
+
+    def _personalise(self) -> None:
+        log.info("body %d: personalising from %d frames", self.body_id, len(self.samples))
+        context = self.objective.scorer.cl_context if self.objective is not None else None
+        try:
+            fit = fit_shape(self.space, self.samples, self.intrinsics, self.config, self.settings, context=context)
+        except SwarmposeError as exc:
+            self.state, self.reason = "failed", str(exc)
+            log.warning("body %d: personalisation failed: %s", self.body_id, exc)
+        else:
+            self.set_body(fit.tracking_body)
+            self.state = "locked"
+            self.found = {"parameters": fit.parameters, "shape": self.space.shape_spec(fit.x),
+                          **body_measures(fit.body)}
+            log.info("body %d: shape locked after %.1f s: %s (height %.3f m)", self.body_id, fit.seconds,
+                     self.found["shape"], self.found["height_m"])
+        finally:
+            self.samples = []
+
+    def personalisation(self) -> dict:
+        """The state of the personalisation (see the class docstring)."""
+        out = {"id": self.body_id, "state": self.state, "frames": self.needed if self.state != "collecting"
+               else len(self.samples), "needed": self.needed}
+        if self.state == "locked":
+            out.update({k: self.found[k] for k in ("parameters", "height_m", "volume_l")})
+        if self.reason:
+            out["reason"] = self.reason
+        return out
