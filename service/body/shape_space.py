@@ -9,9 +9,11 @@ A :class:`ShapeSpace` gives, for a parameter vector ``x`` (D,) within ``lower..u
   program or a new decimation per candidate.
 
 Spaces: :class:`MakeHumanSpace` (the five macro sliders of
-:mod:`swarmpose.body.makehuman_macros`). The built-in body has none yet: its marching-cubes
-mesh changes topology with every shape. :func:`shape_space_for` picks one from a
-``--body`` spec; a glTF file has no shape parameters and is refused.
+:mod:`swarmpose.body.makehuman_macros`) and, for the built-in body, whose marching-cubes mesh
+changes topology with every shape, :class:`~swarmpose.body.builtin_shape_space.BuiltinSpace`
+(stature and three girths; its tracking body deforms one decimated mesh analytically).
+:func:`shape_space_for` picks one from a ``--body`` spec; a glTF file has no shape parameters
+and is refused.
 """
 
 from __future__ import annotations
@@ -142,8 +144,9 @@ def shape_space_for(body: str, shape: str = "", triangles: int = 1500) -> ShapeS
     if body.startswith("makehuman:"):
         return MakeHumanSpace(body.split(":", 1)[1], triangles)
     if body == "builtin":
-        raise ConfigError("the built-in body has no shape space yet (its marching-cubes mesh changes topology "
-                          "with the shape); personalise with --body makehuman:DIR")
+        from swarmpose.body.builtin_shape_space import BuiltinSpace
+
+        return BuiltinSpace(shape, triangles)
     if body.lower().endswith((".glb", ".gltf")):
         raise ConfigError(f"{body} is a fixed body with no shape parameters to fit; personalise from "
                           "--body makehuman:DIR (the MakeHuman assets) or --body builtin, and load the result "

@@ -39,7 +39,7 @@ class TrackerConfig:
     retire_frames: int = setting(30, "frames a person may go unseen (occluded, crossing) before its id is retired",
                                  minimum=0)
     personalize: int = setting(0, "personalise the body from each person's first N tracked frames, then lock the "
-                                  "shape (0 = off; needs --body makehuman:DIR)", minimum=0)
+                                  "shape (0 = off; needs --body makehuman:DIR or builtin)", minimum=0)
     seed: int = setting(0, "PSO seed (a run repeats exactly with the same seed)", minimum=0)
     start_budget: int = setting(64, "the start's PSOs per facing run at least this many particles and generations "
                                     "(once per track)", minimum=1)

@@ -138,3 +138,25 @@ def test_personalize_n_locks_each_bodys_shape_online_and_status_and_info_say_so(
                                      personalisation=personalisation_info(config, parts.pipeline.personalisation)))
         assert info["body"]["personalisation"]["bodies"][0]["parameters"] == locked["parameters"]
     assert len(sink.frames) == 16 and all(m["bodies"] for m in sink.frames)
+
+
+def test_personalize_fits_the_builtin_bodys_height_and_girths(tmp_path, capsys):
+    """A built-in male-heavy subject (1.78 m, torso girth 1.35, arms and legs 1.25) from the
+    average built-in body (1.75 m, girths 1.0): height within 4 cm and every girth found
+    thicker than the start, on a small budget (the oracle: the preset's own numbers)."""
+    from swarmpose.body.parametric_shape import BUILTIN_PRESETS
+    from swarmpose.cli.main import main
+
+    seq = tmp_path / "heavy"
+    assert main(["synth", "--body", "builtin", "--shape", "male-heavy", "--motion", "builtin:walk", "--frames", "12",
+                 "--out", str(seq), "--quiet"]) == 0
+    capsys.readouterr()  # synth's own lines
+    assert main(["personalize", str(seq), "--body", "builtin", "--shape", "male", "--frames", "12", "--particles",
+                 "24", "--generations", "24", "--keyframes", "6", "--rounds", "1", "--out", str(tmp_path / "me.glb"),
+                 "--json", "--quiet"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    truth = BUILTIN_PRESETS["male-heavy"]
+    assert abs(report["height_m"] - truth.height) < 0.04, report
+    assert "sex=male" in report["shape"]
+    for name in ("torso", "arms", "legs"):
+        assert report["parameters"][name] > 1.08, report["parameters"]

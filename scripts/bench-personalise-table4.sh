@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Table 4 with an "auto" column (issue 15): for each subject of BENCHMARKS.md's Table 4, personalise
+# from the first 30 frames of its walk, then track the first 50 frames with the automatic body, the
+# true shape, the other presets and the built-in body scaled to the subject's height (hybrid,
+# simulated detector, p = g = 64). Then the height error over frames used (female-tall walk).
+# One JSON line per run; resumable (a run whose OUT/<name>.json exists is skipped).
+#   usage: scripts/bench-personalise-table4.sh OUT
+set -euo pipefail
+OUT=${1:?usage: scripts/bench-personalise-table4.sh OUT}
+S=${SWARMPOSE:-.venv/bin/swarmpose}
+MH=${MH:-../shared/assets/bodies/makehuman}
+WALK=${WALK:-../shared/assets/mocap/bvh11_131_01.bvh}
+mkdir -p "$OUT"
+run() {  # name, then the command
+  local name=$1; shift
+  [ -s "$OUT/$name.json" ] || { "$@" > "$OUT/$name.tmp" && mv "$OUT/$name.tmp" "$OUT/$name.json"; }
+  echo "{\"run\": \"$name\", \"result\": $(cat "$OUT/$name.json")}"
+}
+declare -A HEIGHT=([male]=1.75 [female]=1.61 [male-heavy]=1.75)
+for subject in male female male-heavy; do
+  seq="$OUT/walk-$subject"
+  [ -s "$seq/groundtruth.jsonl" ] || "$S" -q synth --body "makehuman:$MH" --shape "$subject" --motion "$WALK" \
+      --frames 50 --out "$seq" >/dev/null
+  run "auto-$subject" "$S" -q personalize "$seq" --body "makehuman:$MH" --frames 30 --out "$OUT/auto-$subject.glb" --json
+  run "eval-$subject-auto" "$S" -q eval "$seq" --body "$OUT/auto-$subject.glb" --frames 50 --json
+  for model in male female male-heavy; do
+    run "eval-$subject-$model" "$S" -q eval "$seq" --body "makehuman:$MH" --shape "$model" --frames 50 --json
+  done
+  run "eval-$subject-builtin" "$S" -q eval "$seq" --body builtin --shape "height=${HEIGHT[$subject]}" --frames 50 --json
+done
+seq="$OUT/walk-female-tall"
+[ -s "$seq/groundtruth.jsonl" ] || "$S" -q synth --body "makehuman:$MH" --shape female-tall --motion "$WALK" \
+    --frames 60 --out "$seq" >/dev/null
+for n in 5 10 20 30 60; do
+  run "frames-$n" "$S" -q personalize "$seq" --body "makehuman:$MH" --frames "$n" --out "$OUT/frames-$n.glb" --json
+done
