@@ -4,6 +4,7 @@
 # the true and recovered height, volume and mean vertex distance. Resumable: a subject whose
 # OUT/<subject>.json exists is skipped.
 #   usage: scripts/bench-personalise.sh OUT [FRAMES] [PARTICLES]
+# (PARTICLES: particles and generations of the tracking and pose refits; the shape PSO is 16 x 16)
 set -euo pipefail
 OUT=${1:?usage: scripts/bench-personalise.sh OUT [FRAMES] [PARTICLES]}
 FRAMES=${2:-30}

@@ -67,6 +67,9 @@ class Tracker:
             loaded = body
         else:
             loaded = load_body(body, shape or None)
+        if self.config.personalize:
+            raise ConfigError("personalize is not offered by the Python Tracker yet: personalise once with "
+                              "`swarmpose personalize SOURCE --out me.glb`, then pass body='me.glb'")
         triangles = self.config.triangles
         self.body = loaded if len(loaded.triangles) <= triangles else loaded.tracking_lod(triangles)
         self._owns_detector = isinstance(detector, str)

@@ -45,8 +45,9 @@ class ServiceConfig:
     detector: str = setting("simulated", "2D joints: simulated | onnx:MODEL.onnx[?adapter=...] | "
                                          "openpose-json:DIR[?layout=...]", aliases=("joints",))
     body: str = setting("builtin", "body model: builtin, makehuman:DIR or a .glb/.gltf file")
-    shape: str = setting("", "body shape: a preset (male, female, male-heavy, ...) or height=1.8,torso=1.1,... "
-                             "(empty: the body's default)")
+    shape: str = setting("", "body shape: a preset (male, female, male-heavy, ...), height=1.8,torso=1.1,... "
+                             "(builtin) or gender=0.3,weight=0.8,... (MakeHuman sliders 0..1) (empty: the body's "
+                             "default)")
     tracker: TrackerConfig = section(TrackerConfig, "the tracker")
     camera_id: str = setting("camera0", "the <camera> of the zenoh keys swarmpose/<camera>/... and of every message")
     frames: int = setting(0, "stop after this many frames (0 = all)", minimum=0, aliases=("max_frames",))

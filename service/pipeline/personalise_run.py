@@ -70,7 +70,7 @@ def collect_samples(config: ServiceConfig, space: ShapeSpace, frames: int,
                 tracked = result.bodies[0]
                 intrinsics = frame.intrinsics
                 if tracked.state != "lost" and tracked.pose is not None:
-                    samples.append(ShapeSample(frame, tracked.detection, tracked.pose))
+                    samples.append(ShapeSample(replace(frame, color=None), tracked.detection, tracked.pose))
     return samples, intrinsics, read
 
 

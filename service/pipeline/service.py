@@ -73,7 +73,9 @@ def make_pipeline(body: SkinnedBody, detector: Detector, config: ServiceConfig,
     else:
         def make(intrinsics, body_id):
             return BodyTracker(body, intrinsics, t, body_id=body_id)
-    return FramePipeline(detector, make, t.max_people, t.retire_frames)
+    pipeline = FramePipeline(detector, make, t.max_people, t.retire_frames)
+    pipeline.personalise_frames = t.personalize if space is not None else 0
+    return pipeline
 
 
 def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score: bool = True,
@@ -137,11 +139,14 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
     parts = open_parts(config, stack, out=out or config.record)
     worker: Worker | None = None
 
-    def info() -> dict:
-        return info_message(config.camera_id, intrinsics=parts.pipeline.intrinsics, body=parts.body,
+    def info() -> dict:  # zenoh's thread: only references and the stats' snapshot are read here
+        tracker = parts.pipeline.tracker
+        snapshot = worker.stats.personalisation if worker is not None else {}
+        return info_message(config.camera_id, intrinsics=parts.pipeline.intrinsics,
+                            body=tracker.body if tracker is not None else parts.body,
                             body_spec=config.body, source=config.source, detector=config.detector,
                             mode=config.tracker.mode, opencl_device=parts.pipeline.device_name,
-                            personalisation=personalisation_info(config, parts.pipeline.personalisation))
+                            personalisation=personalisation_info(config, snapshot.get("bodies", [])))
 
     zenoh = None
     z = config.zenoh

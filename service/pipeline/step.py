@@ -113,6 +113,9 @@ class FramePipeline:
             return self.people.device_name
         return "" if self.tracker is None else self.tracker.device_name
 
+    personalise_frames = 0
+    """N of ``--personalize N`` (0: off); set by whoever builds personalising trackers."""
+
     @property
     def personalisation(self) -> list[dict]:
         """The personalisation state of each tracked body (``--personalize N``; empty without)."""

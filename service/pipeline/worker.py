@@ -281,9 +281,9 @@ class Worker:
             self.stats.update(skipped=1)
             return skipped_result(got.item, got.received_ns)
         result = self.pipeline.track(got.item, got.detection, got.received_ns)
-        personalisation = self.pipeline.personalisation
-        if personalisation:
-            self.stats.update(personalisation={"needed": personalisation[0]["needed"], "bodies": personalisation})
+        needed = self.pipeline.personalise_frames
+        if needed:  # --personalize: every body's state, none once everybody has left
+            self.stats.update(personalisation={"needed": needed, "bodies": self.pipeline.personalisation})
         if result.people is not None:  # several people: a frame without anybody in view is no failure
             state = result.bodies[0].state if result.bodies else "none"
             self.stats.update(tracker_state=state, people=dict(result.people))

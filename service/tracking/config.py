@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import check_settings, setting
 from swarmpose.tracking.objective import ObjectiveWeights
 from swarmpose.tracking.pso import VARIANTS, PsoConfig
@@ -39,7 +40,8 @@ class TrackerConfig:
     retire_frames: int = setting(30, "frames a person may go unseen (occluded, crossing) before its id is retired",
                                  minimum=0)
     personalize: int = setting(0, "personalise the body from each person's first N tracked frames, then lock the "
-                                  "shape (0 = off; needs --body makehuman:DIR or builtin)", minimum=0)
+                                  "shape (0 = off, else 3..300; needs --body makehuman:DIR or builtin)", minimum=0,
+                           maximum=300)
     seed: int = setting(0, "PSO seed (a run repeats exactly with the same seed)", minimum=0)
     start_budget: int = setting(64, "the start's PSOs per facing run at least this many particles and generations "
                                     "(once per track)", minimum=1)
@@ -63,6 +65,9 @@ class TrackerConfig:
 
     def __post_init__(self) -> None:
         check_settings(self)
+        if 0 < self.personalize < 3:
+            raise ConfigError(f"personalize = {self.personalize}: a shape needs at least 3 tracked frames "
+                              "(0 turns personalisation off)")
 
     def refine_at(self, generations: int) -> int:
         """The generation of a ``generations``-long PSO from which it scores at full resolution

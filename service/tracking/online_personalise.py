@@ -64,14 +64,15 @@ class PersonalisingTracker(BodyTracker):
         context = self.objective.scorer.cl_context if self.objective is not None else None
         try:
             fit = fit_shape(self.space, self.samples, self.intrinsics, self.config, self.settings, context=context)
-        except SwarmposeError as exc:
-            self.state, self.reason = "failed", str(exc)
-            log.warning("body %d: personalisation failed: %s", self.body_id, exc)
-        else:
+            found = {"parameters": fit.parameters, "shape": self.space.shape_spec(fit.x), **body_measures(fit.body)}
             self.set_body(fit.tracking_body)
+        except Exception as exc:  # a fit that fails leaves the start body, says why and is not tried again
+            self.reason = str(exc) if isinstance(exc, SwarmposeError) else f"{type(exc).__name__}: {exc}"
+            self.state = "failed"
+            log.warning("body %d: personalisation failed: %s", self.body_id, self.reason)
+        else:
+            self.found = found
             self.state = "locked"
-            self.found = {"parameters": fit.parameters, "shape": self.space.shape_spec(fit.x),
-                          **body_measures(fit.body)}
             log.info("body %d: shape locked after %.1f s: %s (height %.3f m)", self.body_id, fit.seconds,
                      self.found["shape"], self.found["height_m"])
         finally:

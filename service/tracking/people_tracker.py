@@ -140,7 +140,7 @@ class PeopleTracker:
         return [t.tracker.personalisation() for t in self.tracks if hasattr(t.tracker, "personalisation")]
 
     def _release(self, tracker: BodyTracker) -> None:
-        tracker.reset()
+        tracker.new_person()  # a parked tracker keeps nothing of its person (a --personalize fit)
         self._spare.append(tracker)
 
     def _tracker(self, body_id: int) -> BodyTracker:

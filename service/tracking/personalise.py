@@ -6,8 +6,9 @@ shape space's start body). :func:`fit_shape` chooses ``keyframes`` well-spread f
 0. **Sweep.** A coarse grid (:data:`SWEEP`: gender × height) of shapes, each with its own pose
    step, picks the start: poses tracked with the start body favour shapes like it.
 1. **Shape step.** A PSO over the space's parameters (:class:`~swarmpose.body.shape_space.ShapeSpace`)
-   with the poses held, minimising the mean over the key frames of ``w_D·(E_D + E_S) + w_J·E_J``
-   (the tracker's objective with its own weights, plus the silhouette term E_S below), plus
+   with the poses held, minimising the mean over the key frames of ``E + w_D·E_S`` (the
+   tracker's objective E with its own weights, penetration term included, plus the silhouette
+   term E_S below), plus
    ``w_B·E_B``, the bone-length term below. Each frame's root may move by one of
    :data:`ROOT_OFFSETS_M` per candidate (a taller body moves its hips). Each candidate shape is
    a buffer upload into one scorer per key frame (same topology), each scorer keeping its
@@ -44,7 +45,7 @@ from swarmpose.body.kinematics import quaternion_to_matrix
 from swarmpose.body.shape_space import ShapeSpace
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
-from swarmpose.core.errors import PersonalisationError
+from swarmpose.core.errors import ConfigError, PersonalisationError
 from swarmpose.detect.joints import Joints2D
 from swarmpose.gpu.context import ClContext
 from swarmpose.gpu.scorer import ParticleScorer
@@ -81,7 +82,8 @@ BONE_WEIGHT = 5.0
 
 
 SWEEP = {"gender": (0.0, 1.0), "height": (0.2, 0.5, 0.8)}
-"""Stage 0's grid (see :func:`_sweep`); the built-in body's height is in metres."""
+"""Stage 0's grid (see :func:`_sweep`): parameters by name, 0..1 (the built-in body's height is its
+0..1 slider over 1.45-2.05 m; it has no gender)."""
 
 
 @dataclass(frozen=True)
@@ -94,7 +96,7 @@ class FitSettings:
     rounds: int = 3
     particles: int = 16
     generations: int = 16
-    tile: tuple[int, int] = (96, 96)
+    tile: tuple[int, int] = (96, 96)  # falls back to the tracker's where the device lacks local memory
     seed: int = 0
     pose_steps: int = 2
     bone_weight: float = BONE_WEIGHT
@@ -104,7 +106,7 @@ class FitSettings:
 @dataclass
 class ShapeFit:
     """The result: parameters ``x`` (D,) and by name, the full-resolution and tracking bodies,
-    the frames used (indices into the samples), the energy after each round, and seconds."""
+    the key frames (indices into the samples that had a pose), the energy after each round, and seconds."""
 
     x: np.ndarray
     parameters: dict[str, float]
@@ -161,7 +163,10 @@ class _KeyFrame:
     def __init__(self, sample: ShapeSample, body: SkinnedBody, intrinsics: Intrinsics, config: TrackerConfig,
                  tile: tuple[int, int], context: ClContext, tracker: BodyTracker):
         self.sample, self.pose = sample, np.asarray(sample.pose, float)
-        scorer = ParticleScorer(body, intrinsics, tile, threshold=config.threshold_m, context=context)
+        try:
+            scorer = ParticleScorer(body, intrinsics, tile, threshold=config.threshold_m, context=context)
+        except ConfigError:  # the fit's finer tile needs more local memory than the device has (GPUs)
+            scorer = ParticleScorer(body, intrinsics, config.tile, threshold=config.threshold_m, context=context)
         self.objective = Objective(body, intrinsics, scorer, config.weights)
         depth = np.asarray(sample.frame.depth, np.float32)
         self.depth = np.where(np.isfinite(depth) & (depth > 0), depth, np.float32(0.0))
@@ -203,8 +208,9 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
     usable = [s for s in samples if s.pose is not None and np.all(np.isfinite(s.pose))]
     if len(usable) < MIN_FRAMES:
         raise PersonalisationError(f"only {len(usable)} of {len(samples)} frames were tracked (at least {MIN_FRAMES} "
-                                   "needed): is a person in view, is the detector right for the source? Pass more "
-                                   "frames (--frames) or a recording where the whole body is seen")
+                                   "needed): is a person in view, is the detector right for the source? Give more "
+                                   "frames (personalize --frames, or a larger --personalize N) or a recording where "
+                                   "the whole body is seen")
     if config.mode == "lift":
         raise PersonalisationError("the lift mode fits no body; personalise with mode hybrid, depth or joints")
     config = replace(config, max_people=1, coarse_share=0.0)
@@ -261,7 +267,7 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
             progress(f"round {round_ + 1}/{settings.rounds}: energy {best.value:.2f}, "
                      + ", ".join(f"{k} {v:.3f}" for k, v in space.parameters(x).items()))
     full = space.full_body(x)
-    return ShapeFit(x, space.parameters(x), full, body, [usable.index(k.sample) for k in keys], energies,
+    return ShapeFit(x, space.parameters(x), full, body, chosen, energies,
                     time.perf_counter() - t0)
 
 
