@@ -51,10 +51,9 @@ def tall_walk(tmp_path_factory):
 def test_personalize_recovers_a_tall_subjects_height_and_writes_a_body_that_loads(tall_walk, tmp_path, capsys):
     """The start body is 1.68 m; the subject 1.93 m. On this test's small budget (16 frames,
     tracking and pose refits at p = g = 24, 2 rounds) the fit must land within 4 cm of the true
-    height and 12 % of the volume (the start
-    body is 25 cm and about 25 % off)
-    (the issue's 2 cm / 5 % goal is measured at the defaults by scripts/bench-personalise.sh),
-    and the GLB must load as --body with its parameters."""
+    height and 12 % of the volume (the start body is 25 cm and about 25 % off; the issue's 2 cm /
+    5 % goal is measured at the defaults by scripts/bench-personalise.sh), and the GLB must load
+    as --body with its parameters."""
     from swarmpose.body.loader import load_body
     from swarmpose.cli.main import main
     from swarmpose.tracking.personalise import body_measures
