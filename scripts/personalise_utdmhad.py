@@ -30,8 +30,8 @@ def kinect_limbs(joints3d: np.ndarray) -> dict[str, float]:
     """Median over frames and both sides of each limb's length (m) in (F, J, 3) joints."""
     out = {}
     for limb, (a, b) in LIMBS.items():
-        lengths = [np.linalg.norm(joints3d[:, EVAL_JOINTS.index(f"{s}_{a}")] - joints3d[:, EVAL_JOINTS.index(f"{s}_{b}")],
-                                  axis=1) for s in ("left", "right")]
+        ends = [(EVAL_JOINTS.index(f"{s}_{a}"), EVAL_JOINTS.index(f"{s}_{b}")) for s in ("left", "right")]
+        lengths = [np.linalg.norm(joints3d[:, i] - joints3d[:, j], axis=1) for i, j in ends]
         out[limb] = float(np.nanmedian(np.concatenate(lengths)))
     return out
 

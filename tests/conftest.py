@@ -61,3 +61,26 @@ def synthesize_scene(out: Path, specs: tuple[str, ...], frames: int, seed: int, 
     synthesize_people(people, out, SynthConfig(frames=frames, camera_distance=camera_distance, seed=seed),
                       progress=False)
     return out
+
+
+class ValidatingSink:
+    """A worker sink that keeps every frame and status message, each validated against its
+    schema (a message that fails raises, and the worker then drops the sink: the test sees the
+    messages stop)."""
+
+    def __init__(self):
+        self.frames: list[dict] = []
+        self.statuses: list[dict] = []
+
+    def frame(self, message: dict, frame) -> None:
+        from swarmpose.messages import validate
+
+        self.frames.append(validate(message))
+
+    def status(self, message: dict) -> None:
+        from swarmpose.messages import validate
+
+        self.statuses.append(validate(message))
+
+    def close(self) -> None:
+        """Nothing to release."""

@@ -7,14 +7,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import synthesize_scene
+from conftest import ValidatingSink, synthesize_scene
 
 import swarmpose
 from swarmpose.body.loader import load_body
 from swarmpose.detect.people import segment_people
 from swarmpose.detect.per_person import MASK_GREY, PersonDetection, masked_colour
 from swarmpose.detect.simulated import SimulatedDetector
-from swarmpose.messages import validate
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.pipeline.worker import Worker
 from swarmpose.sim.people_metrics import TruePerson, score_people
@@ -122,26 +121,13 @@ def test_an_unseen_track_keeps_its_id_then_is_retired(three):
 
 
 def test_the_worker_reports_people_in_its_status(three):
-    class Collect:
-        def __init__(self):
-            self.frames, self.statuses = [], []
-
-        def frame(self, message, frame):
-            self.frames.append(validate(message))
-
-        def status(self, message):
-            self.statuses.append(validate(message))
-
-        def close(self):
-            pass
-
     uri = f"folder:{three}"
     source = open_source(uri)
     body = load_body("builtin")
     pipeline = FramePipeline(SimulatedDetector(source.ground_truth),
                              lambda intr, i: BodyTracker(body, intr, TrackerConfig(mode="lift"), body_id=i),
                              max_people=2)
-    sink = Collect()
+    sink = ValidatingSink()
     Worker(lambda: open_source(uri), pipeline, [sink], camera="test", drop_stale=False, source_uri=uri,
            status_period_s=0.2, source=source).run()
     people = sink.statuses[-1]["tracker"]["people"]

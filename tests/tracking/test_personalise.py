@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import MAKEHUMAN, MOCAP, needs_assets
+from conftest import MAKEHUMAN, MOCAP, ValidatingSink, needs_assets
 
 from swarmpose.tracking.personalise import bone_energy, spread_frames
 
@@ -106,23 +106,10 @@ def test_personalize_n_locks_each_bodys_shape_online_and_status_and_info_say_so(
     from swarmpose.sources.registry import open_source
     from swarmpose.tracking.config import TrackerConfig
 
-    class Collect:
-        def __init__(self):
-            self.frames, self.statuses = [], []
-
-        def frame(self, message, frame):
-            self.frames.append(validate(message))
-
-        def status(self, message):
-            self.statuses.append(validate(message))
-
-        def close(self):
-            pass
-
     uri = f"folder:{tall_walk}"
     config = ServiceConfig(source=uri, body=f"makehuman:{MAKEHUMAN}",
                            tracker=TrackerConfig(personalize=10, particles=16, generations=16, max_people=1))
-    sink = Collect()
+    sink = ValidatingSink()
     with ExitStack() as stack:
         parts = open_parts(config, stack)
         Worker(lambda: open_source(uri), parts.pipeline, [sink], camera="test", drop_stale=False, source_uri=uri,
