@@ -235,10 +235,6 @@ class BuiltinSpace(ShapeSpace):
         self.upper = np.array([1.0, hi, hi, hi])
         self._start = np.array([slider_of(START_STATURE), 1.0, 1.0, 1.0])
 
-    @property
-    def start(self) -> np.ndarray:
-        return self._start.copy()
-
     def _values(self, x) -> tuple[float, np.ndarray]:
         """Stature (m) and girth factors (3,) of ``x`` (4,), clipped to the bounds."""
         x = np.asarray(x, dtype=np.float64)

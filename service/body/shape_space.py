@@ -40,10 +40,13 @@ class ShapeSpace(ABC):
     def __init__(self, triangles: int = 1500):
         self.triangles = int(triangles)
 
+    _start: np.ndarray
+    """(D,) what :attr:`start` returns; each space sets it."""
+
     @property
-    @abstractmethod
     def start(self) -> np.ndarray:
-        """(D,) the parameters a fit starts from (an average adult)."""
+        """(D,) the parameters a fit starts from (an average adult); a copy."""
+        return self._start.copy()
 
     @abstractmethod
     def full_body(self, x) -> SkinnedBody:
@@ -106,10 +109,6 @@ class MakeHumanSpace(ShapeSpace):
         self.names = MACRO_NAMES
         self.lower, self.upper = np.zeros(len(MACRO_NAMES)), np.ones(len(MACRO_NAMES))
         self._start = MacroShape().vector()
-
-    @property
-    def start(self) -> np.ndarray:
-        return self._start.copy()
 
     def macros(self, x):
         from swarmpose.body.makehuman_macros import MacroShape

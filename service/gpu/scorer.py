@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -38,7 +39,7 @@ from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError, ShapeError
 from swarmpose.gpu.context import ClContext, describe
-from swarmpose.gpu.fk_tables import fk_tables
+from swarmpose.gpu.fk_tables import FkTables, fk_tables
 from swarmpose.gpu.reference import COUNT_NAMES
 from swarmpose.gpu.tile import TileBox, clip_box
 
@@ -46,6 +47,23 @@ __all__ = ["ParticleScorer", "Evaluation", "COUNT_NAMES"]
 
 TERM_NAMES = ("E_J2D", "E_J3D", "E_P")
 """The objective's terms the kernel computes from the named points (see cl/include/joint_term.h)."""
+
+
+@lru_cache(maxsize=8)
+def device_mesh(body: SkinnedBody) -> tuple[FkTables, dict[str, np.ndarray]]:
+    """``body``'s FK tables and the device layout of its mesh, skin and tables (contiguous
+    float32 / int32 arrays by buffer name), made once per body: a shape fit uploads each
+    candidate body to one scorer per key frame. (Bodies hash by identity.)"""
+    tables = fk_tables(body)
+    rest = np.zeros((len(body.vertices), 4), np.float32)
+    rest[:, :3] = body.vertices
+    tris = np.zeros((len(body.triangles), 4), np.int32)
+    tris[:, :3] = body.triangles
+    arrays = {"rest": rest, "idx": np.ascontiguousarray(body.skin_indices, np.int32),
+              "w": np.ascontiguousarray(body.skin_weights, np.float32), "tris": tris,
+              "steps": tables.steps, "links": tables.links, "bone_data": tables.bone_data,
+              "point_bone": tables.point_bone, "point_rest": tables.point_rest}
+    return tables, {k: np.ascontiguousarray(v) for k, v in arrays.items()}
 
 
 @dataclass(frozen=True)
@@ -103,7 +121,7 @@ class ParticleScorer:
         if wg > 1 and not self.atomic:
             raise ConfigError("local_size > 1 needs atomic=True (work-items share the z-buffer)")
         nv, nf, nb = len(body.vertices), len(body.triangles), len(body.bone_names)
-        tables = fk_tables(body)
+        tables = device_mesh(body)[0]
         sizes = tables.defines  # FK scratch: NJ joint and NB frame quaternions, NPT points (float4 each)
         need = (nb * 48 + (nb + sizes["NJ"] + sizes["NPT"]) * 16 + nv * 24 + self.tw * self.th * 4
                 + (wg * 20 if wg > 1 else nf * 4))
@@ -114,7 +132,7 @@ class ParticleScorer:
         self.point_count = len(tables.point_bone)
         self.defines = {"NV": nv, "NF": nf, "NB": nb, "TW": self.tw, "TH": self.th, "WG": wg,
                         "ZATOMIC": self.atomic, "CULL": bool(cull_backfaces), "ZNEAR": float(znear), **sizes}
-        self._mesh = self._upload_mesh(body, tables)
+        self._mesh = self._upload_mesh(body)
         self._capacity = 0
         self._tile_box: TileBox | None = None
         self._observed: np.ndarray | None = None
@@ -128,39 +146,32 @@ class ParticleScorer:
         self.last_timings: dict[str, float] = {}
 
     # ------------------------------------------------------------------ setup
-    @staticmethod
-    def _mesh_arrays(body: SkinnedBody, tables) -> dict[str, np.ndarray]:
-        """The device layout of ``body``'s mesh, skin and FK tables."""
-        nv = len(body.vertices)
-        rest = np.zeros((nv, 4), np.float32)
-        rest[:, :3] = body.vertices
-        tris = np.zeros((len(body.triangles), 4), np.int32)
-        tris[:, :3] = body.triangles
-        return {"rest": rest, "idx": np.ascontiguousarray(body.skin_indices, np.int32),
-                "w": np.ascontiguousarray(body.skin_weights, np.float32), "tris": tris,
-                "steps": tables.steps, "links": tables.links, "bone_data": tables.bone_data,
-                "point_bone": tables.point_bone, "point_rest": tables.point_rest}
-
     def set_body(self, body: SkinnedBody) -> None:
         """Score ``body`` from now on: another shape of the same topology (vertex, triangle,
         bone and named-point counts, as :class:`~swarmpose.body.shape_space.ShapeSpace` keeps
-        them). The mesh is copied into the existing buffers: no program is built again."""
-        tables = fk_tables(body)
+        them). Only the buffers whose contents differ are copied (a shape of one space moves the
+        rest vertices, bone heads and named points; the skin, triangles and FK steps stay): no
+        program is built again."""
+        tables, arrays = device_mesh(body)
         have = (self.defines["NV"], self.defines["NF"], self.defines["NB"], self.point_count)
         got = (len(body.vertices), len(body.triangles), len(body.bone_names), len(tables.point_bone))
         if have != got or tables.defines["NJ"] != self.defines["NJ"]:
             raise ShapeError(f"{body.name}: (vertices, triangles, bones, points) {got} differ from the scorer's "
                              f"{have}; build a new scorer for another topology")
-        for name, array in self._mesh_arrays(body, tables).items():
-            self._cl.enqueue_copy(self.queue, self._mesh[name], np.ascontiguousarray(array), is_blocking=True)
+        held = self._mesh_host
+        for name, array in arrays.items():
+            if array is not held[name] and not np.array_equal(array, held[name]):
+                self._cl.enqueue_copy(self.queue, self._mesh[name], array, is_blocking=True)
+        self._mesh_host = dict(arrays)
         self.body = body
 
-    def _upload_mesh(self, body: SkinnedBody, tables) -> dict:
+    def _upload_mesh(self, body: SkinnedBody) -> dict:
         cl = self._cl
         mf = cl.mem_flags
-        arrays = {**self._mesh_arrays(body, tables), "no_observation": np.zeros(1, np.float32)}
+        self._mesh_host = dict(device_mesh(body)[1])
+        arrays = {**self._mesh_host, "no_observation": np.zeros(1, np.float32)}
         buffers = {k: cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a) for k, a in arrays.items()}
-        npt = len(tables.point_bone)
+        npt = len(self._mesh_host["point_bone"])
         for name, size in (("tgt2d", npt * 16), ("tgt3d", npt * 16), ("pairs", max(npt // 2, 1) * 8), ("pen", 32)):
             buffers[name] = cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.zeros(size, np.uint8))
         return buffers

@@ -13,7 +13,7 @@ from swarmpose.core.errors import PersonalisationError
 from swarmpose.core.progress import progress_bar
 from swarmpose.detect.registry import make_detector
 from swarmpose.pipeline.config import ServiceConfig
-from swarmpose.pipeline.run import results
+from swarmpose.pipeline.run import remember_frames, results
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.sources.base import Frame
 from swarmpose.sources.registry import open_source
@@ -39,7 +39,7 @@ def collect_samples(config: ServiceConfig, space: ShapeSpace, frames: int,
     """Track the first ``frames`` frames of ``config.source`` (one person) with the start body
     of ``space``: (the samples with a pose, the camera, the frames read)."""
     config.require_source()
-    tracker_config = replace(config.tracker, max_people=1, triangles=space.triangles)
+    tracker_config = replace(config.tracker, triangles=space.triangles)  # the pipeline tracks one person
     body = space.tracking_body(space.start)
     samples: list[ShapeSample] = []
     intrinsics = None
@@ -51,20 +51,12 @@ def collect_samples(config: ServiceConfig, space: ShapeSpace, frames: int,
         stack.callback(detector.close)
         pipeline = FramePipeline(detector, lambda k, body_id: BodyTracker(body, k, tracker_config, body_id=body_id))
         frames_of: dict[int, Frame] = {}
-
-        def remember():
-            for item in source:
-                if isinstance(item, Frame):
-                    frames_of.clear()
-                    frames_of[item.index] = item
-                yield item
-
         with progress_bar("personalise: track", frames or getattr(source, "length", None),
                           enabled=show_progress) as bar:
-            for result in results(remember(), pipeline, frames):
+            for result in results(remember_frames(source, frames_of), pipeline, frames):
                 read += 1
                 bar.update(1)
-                frame = frames_of.get(result.index)
+                frame = frames_of.pop(result.index, None)
                 if frame is None or not result.bodies:
                     continue
                 tracked = result.bodies[0]

@@ -74,7 +74,7 @@ def run_sequence(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline
     try:
         with progress_bar("track", total, enabled=progress) as bar:
             frames_of = {}
-            for result in results(_remember(source, frames_of), pipeline, frames, summary):
+            for result in results(remember_frames(source, frames_of), pipeline, frames, summary):
                 message = result.to_message(camera)
                 frame = frames_of.pop(result.index, None)
                 for sink in list(live):
@@ -106,7 +106,7 @@ def source_error(source: object) -> str:
     return status
 
 
-def _remember(source: Iterable[Frame | SkippedFrame], frames_of: dict) -> Iterator[Frame | SkippedFrame]:
+def remember_frames(source: Iterable[Frame | SkippedFrame], frames_of: dict) -> Iterator[Frame | SkippedFrame]:
     """Pass ``source`` through, keeping each Frame by index until its message is handed out."""
     for item in source:
         if isinstance(item, Frame):

@@ -73,9 +73,8 @@ def make_pipeline(body: SkinnedBody, detector: Detector, config: ServiceConfig,
     else:
         def make(intrinsics, body_id):
             return BodyTracker(body, intrinsics, t, body_id=body_id)
-    pipeline = FramePipeline(detector, make, t.max_people, t.retire_frames)
-    pipeline.personalise_frames = t.personalize if space is not None else 0
-    return pipeline
+    return FramePipeline(detector, make, t.max_people, t.retire_frames,
+                         personalise_frames=t.personalize if space is not None else 0)
 
 
 def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score: bool = True,
@@ -141,12 +140,12 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
 
     def info() -> dict:  # zenoh's thread: only references and the stats' snapshot are read here
         tracker = parts.pipeline.tracker
-        snapshot = worker.stats.personalisation if worker is not None else {}
+        snapshot = worker.stats.personalisation if worker is not None else {}  # the tracking thread's copy
         return info_message(config.camera_id, intrinsics=parts.pipeline.intrinsics,
                             body=tracker.body if tracker is not None else parts.body,
                             body_spec=config.body, source=config.source, detector=config.detector,
                             mode=config.tracker.mode, opencl_device=parts.pipeline.device_name,
-                            personalisation=personalisation_info(config, snapshot.get("bodies", [])))
+                            personalisation=snapshot or None)
 
     zenoh = None
     z = config.zenoh
@@ -170,13 +169,6 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
                     status_period_s=config.status_period_s, reopen_s=config.reopen_s, source_uri=uri,
                     detector_spec=config.detector, zenoh_state=zenoh.state if zenoh else None, source=parts.source)
     return worker, parts, zenoh
-
-
-def personalisation_info(config: ServiceConfig, bodies: list[dict]) -> dict | None:
-    """The info message's ``body.personalisation`` (None when ``--personalize`` is off)."""
-    if config.tracker.personalize <= 0:
-        return None
-    return {"needed": config.tracker.personalize, "bodies": bodies}
 
 
 def run_summary(parts: Parts, stats: WorkerStats, seconds: float, worker: Worker) -> dict:

@@ -91,13 +91,16 @@ class FramePipeline:
     :class:`~swarmpose.tracking.body_tracker.BodyTracker` for a camera's intrinsics and a
     body id; max_people: 1 tracks one person (no segmentation), more tracks each person the
     depth segmentation finds, up to this many; retire_frames: frames a person may go unseen
-    before its id is retired. ``detect`` and ``track`` may run in two threads (one each).
+    before its id is retired; personalise_frames: N when ``make_tracker`` builds trackers that
+    personalise their body from N frames (``--personalize``), else 0. ``detect`` and ``track``
+    may run in two threads (one each).
     """
 
     def __init__(self, detector: Detector, make_tracker: Callable[[Intrinsics, int], BodyTracker],
-                 max_people: int = 1, retire_frames: int = 30):
+                 max_people: int = 1, retire_frames: int = 30, personalise_frames: int = 0):
         self.detector, self.make_tracker = detector, make_tracker
         self.max_people, self.retire_frames = int(max_people), int(retire_frames)
+        self.personalise_frames = int(personalise_frames)
         self.tracker: BodyTracker | None = None
         self.people: PeopleTracker | None = None
         self.intrinsics: Intrinsics | None = None
@@ -113,17 +116,18 @@ class FramePipeline:
             return self.people.device_name
         return "" if self.tracker is None else self.tracker.device_name
 
-    personalise_frames = 0
-    """N of ``--personalize N`` (0: off); set by whoever builds personalising trackers."""
-
     @property
-    def personalisation(self) -> list[dict]:
-        """The personalisation state of each tracked body (``--personalize N``; empty without)."""
+    def personalisation(self) -> dict | None:
+        """``{"needed": N, "bodies": [each tracked body's state]}`` with ``--personalize N``
+        (``personalise_frames``), None without: the status and info messages' ``personalisation``."""
+        if not self.personalise_frames:
+            return None
         if self.people is not None:
-            return self.people.personalisation()
-        if self.tracker is not None and hasattr(self.tracker, "personalisation"):
-            return [self.tracker.personalisation()]
-        return []
+            bodies = self.people.personalisation()
+        else:
+            state = None if self.tracker is None else self.tracker.personalisation()
+            bodies = [] if state is None else [state]
+        return {"needed": self.personalise_frames, "bodies": bodies}
 
     def detect(self, frame: Frame) -> Detection:
         """2D joints of ``frame``: of each person the depth shows (``max_people`` > 1), else of

@@ -84,7 +84,7 @@ class Worker:
         self.source = source if source is not None else open_source()
         self.source_state = "running"
         self.state = "starting"
-        self.stats = WorkerStats(keep_all=not drop_stale)
+        self.stats = WorkerStats(keep_all=not drop_stale, personalisation=pipeline.personalisation or {})
         self.errors: collections.deque[str] = collections.deque(maxlen=MAX_ERRORS)
         self.sink_errors: list[str] = []
         """One line per sink that failed on a frame (it got nothing more)."""
@@ -281,9 +281,9 @@ class Worker:
             self.stats.update(skipped=1)
             return skipped_result(got.item, got.received_ns)
         result = self.pipeline.track(got.item, got.detection, got.received_ns)
-        needed = self.pipeline.personalise_frames
-        if needed:  # --personalize: every body's state, none once everybody has left
-            self.stats.update(personalisation={"needed": needed, "bodies": self.pipeline.personalisation})
+        personalisation = self.pipeline.personalisation
+        if personalisation is not None:  # --personalize: every body's state, none once everybody has left
+            self.stats.update(personalisation=personalisation)
         if result.people is not None:  # several people: a frame without anybody in view is no failure
             state = result.bodies[0].state if result.bodies else "none"
             self.stats.update(tracker_state=state, people=dict(result.people))

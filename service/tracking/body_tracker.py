@@ -50,6 +50,13 @@ HISTORY = 5
 """Previous solutions injected as particles."""
 
 
+def observed_depth(depth: np.ndarray) -> np.ndarray:
+    """Depth (H, W) as float32 metres with every invalid reading (NaN, infinite, <= 0) set to 0,
+    the scorer's "no measurement"."""
+    depth = np.asarray(depth, dtype=np.float32)
+    return np.where(np.isfinite(depth) & (depth > 0), depth, np.float32(0.0))
+
+
 def search_split(spent_s: dict[str, float], pso_ms: float) -> dict[str, float]:
     """Where a frame's search (``pso_ms``, ms) went, from :attr:`Objective.spent_s` (s):
     ``score`` (the launch: forward kinematics and every term on the device), ``joint_term``
@@ -77,13 +84,7 @@ class BodyTracker:
         if config.mode != "lift":
             context = context or ClContext.for_spec(config.device)
             scorer = ParticleScorer(self.body, intrinsics, config.tile, threshold=config.threshold_m, context=context)
-            coarse = None
-            if config.coarse_share > 0:
-                coarse_body = (self.body if len(self.body.triangles) <= config.coarse_triangles
-                               else self.body.tracking_lod(config.coarse_triangles))
-                coarse = ParticleScorer(coarse_body, intrinsics, config.coarse_tile, threshold=config.threshold_m,
-                                        context=context)
-            self.objective = Objective(self.body, intrinsics, scorer, self.weights, coarse)
+            self.objective = Objective(self.body, intrinsics, scorer, self.weights, self._coarse_scorer(context))
         self.history: list[np.ndarray] = []
         self.previous: np.ndarray | None = None
         self.lo, self.hi = search.pose_bounds()
@@ -97,14 +98,25 @@ class BodyTracker:
         """Track with ``body`` from now on: another shape of this tracker's body with the same
         tracking topology (a :class:`~swarmpose.body.shape_space.ShapeSpace`'s tracking body).
         The track goes on from the last pose."""
+        self.body = body
         if self.objective is not None:
             self.objective.set_body(body)
             if self.objective.coarse is not None:
-                coarse = self.objective.coarse
-                self.objective.coarse = ParticleScorer(body.tracking_lod(self.config.coarse_triangles),
-                                                       self.intrinsics, self.config.coarse_tile,
-                                                       threshold=self.config.threshold_m, context=coarse.cl_context)
-        self.body = body
+                self.objective.coarse = self._coarse_scorer(self.objective.scorer.cl_context)
+
+    def _coarse_scorer(self, context: ClContext) -> ParticleScorer | None:
+        """The coarse level's scorer of :attr:`body` (coarse-to-fine search), None when it is off."""
+        config = self.config
+        if config.coarse_share <= 0:
+            return None
+        coarse_body = (self.body if len(self.body.triangles) <= config.coarse_triangles
+                       else self.body.tracking_lod(config.coarse_triangles))
+        return ParticleScorer(coarse_body, self.intrinsics, config.coarse_tile, threshold=config.threshold_m,
+                              context=context)
+
+    def personalisation(self) -> dict | None:
+        """This body's ``--personalize`` state (see ``PersonalisingTracker``); None: not personalising."""
+        return None
 
     def new_person(self) -> None:
         """Track another person from the next frame (a tracker reused for a new id)."""
@@ -115,7 +127,9 @@ class BodyTracker:
         self.history.clear()
         self.previous = None
 
-    def _box(self, reference: np.ndarray | None, targets: JointTargets) -> tuple[float, float, float, float]:
+    def search_box(self, reference: np.ndarray | None, targets: JointTargets) -> tuple[float, float, float, float]:
+        """The box B (u0, v0, width, height) px the depth term looks in: around the silhouette of
+        the ``reference`` pose (36,) (None: none) and the detected joints, grown 10 %."""
         pts = []
         if reference is not None:
             verts = self.body.pose(reference[None])[0]
@@ -140,7 +154,7 @@ class BodyTracker:
             raise TrackingError(f"frame {frame.index}: depth is {depth.shape[1]}x{depth.shape[0]}, the tracker's "
                                 f"camera is {self.intrinsics.width}x{self.intrinsics.height}; use one intrinsics "
                                 "file for the whole sequence")
-        depth = np.where(np.isfinite(depth) & (depth > 0), depth, np.float32(0.0))
+        depth = observed_depth(depth)
         if self.config.mode == "lift":
             return self._lift(depth, joints, t0)
         targets = JointTargets.from_detection(joints, depth, self.intrinsics, self.body, self.config.min_score)
@@ -174,7 +188,7 @@ class BodyTracker:
             start[i] = s
 
         t1 = time.perf_counter()
-        self.objective.set_frame(depth, self._box(centre, targets), targets, centre)
+        self.objective.set_frame(depth, self.search_box(centre, targets), targets, centre)
         self.objective.take_spent()
         result = self._search(self.objective, start, rng, pso)
         timings["pso"] = 1000 * (time.perf_counter() - t1)
@@ -232,7 +246,7 @@ class BodyTracker:
         t = time.perf_counter()
         w_d, w_j = MODE_WEIGHTS["hybrid"]  # depth mode: the joints weigh as much as in hybrid
         weights = replace(self.weights, joints=max(self.weights.joints, self.weights.depth * w_j / w_d))
-        box = self._box(centre, targets)
+        box = self.search_box(centre, targets)
         joint_objective = None
         if weights.depth > 0 and bool(np.any(depth > 0)):
             joint_objective = Objective(self.body, self.intrinsics, self.objective.scorer,

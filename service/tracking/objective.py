@@ -165,6 +165,12 @@ def weighted_joint_distance(model: np.ndarray, target: np.ndarray, weight: np.nd
     return d @ w / w.sum()
 
 
+def torso_radius(body: SkinnedBody) -> float:
+    """The torso core's radius (m) E_P measures arms against: :data:`TORSO_RADIUS_SHARE` of the
+    hip width."""
+    return TORSO_RADIUS_SHARE * float(np.linalg.norm(body.point("left_hip") - body.point("right_hip")))
+
+
 class Objective:
     """E(h, o) for batches of poses on one frame.
 
@@ -190,8 +196,7 @@ class Objective:
         self.targets = JointTargets.empty()
         self._penetration_points = body.point_indices(ARM_POINTS + ("left_hip", "right_hip", "left_shoulder",
                                                                     "right_shoulder"))
-        self.torso_radius = TORSO_RADIUS_SHARE * float(np.linalg.norm(body.point("left_hip")
-                                                                       - body.point("right_hip")))
+        self.torso_radius = torso_radius(body)
         self.normaliser = 1.0
         self.coarse_normaliser = 1.0
         self.has_depth = False
@@ -204,8 +209,7 @@ class Objective:
         from now on, on the full-resolution level (a coarse level is the caller's to replace)."""
         self.scorer.set_body(body)
         self.body = body
-        self.torso_radius = TORSO_RADIUS_SHARE * float(np.linalg.norm(body.point("left_hip")
-                                                                       - body.point("right_hip")))
+        self.torso_radius = torso_radius(body)
         for scorer in self.levels:
             scorer.joint_targets_owner = None  # the torso radius travels with the targets
 

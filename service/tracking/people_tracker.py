@@ -137,7 +137,8 @@ class PeopleTracker:
 
     def personalisation(self) -> list[dict]:
         """Each current track's personalisation state (``--personalize``; empty without)."""
-        return [t.tracker.personalisation() for t in self.tracks if hasattr(t.tracker, "personalisation")]
+        states = (t.tracker.personalisation() for t in self.tracks)
+        return [s for s in states if s is not None]
 
     def _release(self, tracker: BodyTracker) -> None:
         tracker.new_person()  # a parked tracker keeps nothing of its person (a --personalize fit)

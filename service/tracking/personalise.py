@@ -50,7 +50,7 @@ from swarmpose.detect.joints import Joints2D
 from swarmpose.gpu.context import ClContext
 from swarmpose.gpu.scorer import ParticleScorer
 from swarmpose.sources.base import Frame
-from swarmpose.tracking.body_tracker import BodyTracker
+from swarmpose.tracking.body_tracker import BodyTracker, observed_depth
 from swarmpose.tracking.config import TrackerConfig
 from swarmpose.tracking.objective import JointTargets, Objective
 from swarmpose.tracking.pso import PsoConfig, minimise
@@ -124,9 +124,8 @@ def observed_bone_lengths(samples: Sequence[ShapeSample], body: SkinnedBody, int
     are left out)."""
     seen: dict[tuple[str, str], list[float]] = {b: [] for b in LIMB_BONES}
     for sample in samples:
-        depth = np.asarray(sample.frame.depth, np.float32)
-        depth = np.where(np.isfinite(depth) & (depth > 0), depth, np.float32(0.0))
-        targets = JointTargets.from_detection(sample.joints, depth, intrinsics, body, min_score)
+        targets = JointTargets.from_detection(sample.joints, observed_depth(sample.frame.depth), intrinsics, body,
+                                              min_score)
         where = {n: p for n, p in zip(targets.names, targets.xyz) if np.all(np.isfinite(p))}
         for a, b in LIMB_BONES:
             if a in where and b in where:
@@ -168,10 +167,9 @@ class _KeyFrame:
         except ConfigError:  # the fit's finer tile needs more local memory than the device has (GPUs)
             scorer = ParticleScorer(body, intrinsics, config.tile, threshold=config.threshold_m, context=context)
         self.objective = Objective(body, intrinsics, scorer, config.weights)
-        depth = np.asarray(sample.frame.depth, np.float32)
-        self.depth = np.where(np.isfinite(depth) & (depth > 0), depth, np.float32(0.0))
-        targets = JointTargets.from_detection(sample.joints, self.depth, intrinsics, body, config.min_score)
-        self.objective.set_frame(self.depth, tracker._box(self.pose, targets), targets, self.pose)
+        depth = observed_depth(sample.frame.depth)
+        targets = JointTargets.from_detection(sample.joints, depth, intrinsics, body, config.min_score)
+        self.objective.set_frame(depth, tracker.search_box(self.pose, targets), targets, self.pose)
         self.threshold = config.threshold_m
 
     def energy(self, body: SkinnedBody) -> float:

@@ -101,7 +101,7 @@ def test_personalize_n_locks_each_bodys_shape_online_and_status_and_info_say_so(
     from swarmpose.messages import validate
     from swarmpose.messages.build import info_message
     from swarmpose.pipeline.config import ServiceConfig
-    from swarmpose.pipeline.service import open_parts, personalisation_info
+    from swarmpose.pipeline.service import open_parts
     from swarmpose.pipeline.worker import Worker
     from swarmpose.sources.registry import open_source
     from swarmpose.tracking.config import TrackerConfig
@@ -112,9 +112,12 @@ def test_personalize_n_locks_each_bodys_shape_online_and_status_and_info_say_so(
     sink = ValidatingSink()
     with ExitStack() as stack:
         parts = open_parts(config, stack)
-        Worker(lambda: open_source(uri), parts.pipeline, [sink], camera="test", drop_stale=False, source_uri=uri,
-               status_period_s=0.1, source=parts.source).run()
-        states = [s["tracker"].get("personalisation", {}).get("bodies", [{}])[0].get("state") for s in sink.statuses]
+        worker = Worker(lambda: open_source(uri), parts.pipeline, [sink], camera="test", drop_stale=False,
+                        source_uri=uri, status_period_s=0.1, source=parts.source)
+        assert worker.stats.personalisation == {"needed": 10, "bodies": []}  # before any frame
+        worker.run()
+        states = [(s["tracker"].get("personalisation", {}).get("bodies") or [{}])[0].get("state")
+                  for s in sink.statuses]  # before the first frame: personalisation on, no body yet
         assert "collecting" in states and states[-1] == "locked", states
         locked = sink.statuses[-1]["tracker"]["personalisation"]["bodies"][0]
         assert locked["frames"] == locked["needed"] == 10
@@ -122,7 +125,7 @@ def test_personalize_n_locks_each_bodys_shape_online_and_status_and_info_say_so(
         tracker = parts.pipeline.tracker
         assert tracker.body.height == pytest.approx(locked["height_m"], abs=0.01)  # tracking LOD of the fit
         info = validate(info_message("test", body=tracker.body, body_spec=config.body,
-                                     personalisation=personalisation_info(config, parts.pipeline.personalisation)))
+                                     personalisation=parts.pipeline.personalisation))
         assert info["body"]["personalisation"]["bodies"][0]["parameters"] == locked["parameters"]
     assert len(sink.frames) == 16 and all(m["bodies"] for m in sink.frames)
 
