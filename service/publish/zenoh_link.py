@@ -12,8 +12,16 @@ publishes a worker's messages (see ``protocol/README.md``):
 A router that cannot be reached is not fatal: in client mode zenoh refuses to open, so the
 sink retries every ``retry_s`` seconds (frames meanwhile are counted as ``unsent``) and says
 so in :meth:`ZenohSink.state`; in peer mode the session opens and zenoh keeps trying the
-``connect`` endpoints itself. Malformed endpoints, a zenoh file that does not parse and a
-listen address that cannot be bound raise :class:`~swarmpose.core.errors.PublishError` at once.
+``connect`` endpoints itself. A router lost once the session is open (killed, restarted) is
+reconnected by zenoh, every 0.2 s backing off to 1 s (``RECONNECT``); meanwhile the state says
+the connection is lost and frames are not delivered. Malformed endpoints, a zenoh file that does
+not parse and a listen address that cannot be bound raise
+:class:`~swarmpose.core.errors.PublishError` at once.
+
+Every info query that reaches the queryable is finalised when its callback returns (the querier
+learns at once that no more replies come), answered with an error reply when the info message
+cannot be made, and :meth:`ZenohSink.close` lets the answers in progress go out (up to
+``ANSWER_GRACE_S``) before the session closes.
 """
 
 from __future__ import annotations
@@ -28,6 +36,12 @@ from swarmpose.messages import encode, keys
 from swarmpose.sources.base import Frame, exc_message
 
 UNREACHABLE = "Unable to connect"
+RECONNECT = {"period_init_ms": 200, "period_max_ms": 1000, "period_increase_factor": 2}
+"""How often zenoh tries a lost ``--connect`` endpoint again (a restarted router), unless the
+zenoh file says: zenoh's own default backs off to 4 s between tries, which made frames come
+back 1.5 to 2.2 s after a router restart (scripts/router_restart.py, BENCHMARKS.md)."""
+ANSWER_GRACE_S = 2.0
+"""Seconds :meth:`ZenohSink.close` waits for info queries being answered."""
 
 
 def zenoh_config(mode: str = "peer", connect: Sequence[str] = (), listen: Sequence[str] = (),
@@ -35,7 +49,9 @@ def zenoh_config(mode: str = "peer", connect: Sequence[str] = (), listen: Sequen
     """A ``zenoh.Config``: ``config_file`` (JSON5) first, then mode, endpoints and scouting.
 
     mode: peer or client; connect / listen: endpoints such as ``tcp/127.0.0.1:7447``;
-    multicast: multicast scouting (automatic discovery of peers and routers on the LAN).
+    multicast: multicast scouting (automatic discovery of peers and routers on the LAN); a lost
+    ``connect`` endpoint is tried again every 0.2 s, backing off to 1 s (``RECONNECT``; a
+    ``connect/retry`` in the file wins).
     Raises PublishError naming the bad value.
     """
     import zenoh
@@ -47,6 +63,8 @@ def zenoh_config(mode: str = "peer", connect: Sequence[str] = (), listen: Sequen
     except zenoh.ZError as exc:
         raise PublishError(f"zenoh config file {config_file}: {_short(exc)}; pass a valid JSON5 zenoh "
                            "configuration") from None
+    if config.get_json("connect/retry") in (None, "null"):
+        config.insert_json5("connect/retry", json.dumps(RECONNECT))
     for key, value, what in (("mode", mode, "--mode"), ("connect/endpoints", list(connect), "--connect"),
                              ("listen/endpoints", list(listen), "--listen"),
                              ("scouting/multicast/enabled", bool(multicast), "multicast")):
@@ -99,6 +117,9 @@ class ZenohSink:
         self.unsent = 0
         self._next_try = 0.0
         self._closed = False
+        self._answers = threading.Condition()  # guards _answering and the _closed seen by _answer
+        self._answering = 0
+        self._was_connected = False  # a router or peer was seen: its absence now is a lost connection
         self._try_open(first=True)
 
     # ------------------------------------------------------------------ session
@@ -123,12 +144,26 @@ class ZenohSink:
         self._session, self.error = session, ""
 
     def _answer(self, query) -> None:
+        """zenoh's callback thread: reply with the info message (an error reply when it cannot be made)."""
         import zenoh
 
-        try:
-            query.reply(self.keys["info"], encode(self.info()), encoding=zenoh.Encoding.APPLICATION_JSON)
-        except Exception as exc:  # a failing reply must not take the zenoh callback thread down
-            self.error = f"info query failed: {exc_message(exc)}"
+        with query:  # finalised on exit, not whenever Python frees it: the querier stops waiting at once
+            with self._answers:
+                if self._closed:  # closing: no reply, the query is finalised
+                    return
+                self._answering += 1
+            try:
+                query.reply(self.keys["info"], encode(self.info()), encoding=zenoh.Encoding.APPLICATION_JSON)
+            except Exception as exc:  # a failing reply must not take the zenoh callback thread down
+                self.error = f"info query failed: {exc_message(exc)}"
+                try:
+                    query.reply_err(f"camera {self.camera}: {self.error}")
+                except Exception:  # the session is gone
+                    pass
+            finally:
+                with self._answers:
+                    self._answering -= 1
+                    self._answers.notify_all()
 
     def _put(self, kind: str, message: dict) -> None:
         with self._lock:
@@ -158,14 +193,20 @@ class ZenohSink:
                 pass
         warning = self.error
         if not warning and self.connect and peers + routers == 0:
-            warning = f"no --connect endpoint reachable yet ({', '.join(self.connect)}); zenoh keeps trying"
+            where = ", ".join(self.connect)
+            warning = (f"connection to {where} lost; zenoh reconnects by itself" if self._was_connected
+                       else f"no --connect endpoint reachable yet ({where}); zenoh keeps trying")
+        self._was_connected |= peers + routers > 0
         return {"mode": self.mode, "connect": list(self.connect), "listen": list(self.listen), "peers": peers,
                 "routers": routers, "warning": warning}
 
     def close(self) -> None:
-        """Withdraw the liveliness token and close the session (idempotent)."""
+        """Withdraw the liveliness token and close the session (idempotent). Info queries being
+        answered get their reply first (waits up to ``ANSWER_GRACE_S``); later ones get none."""
         with self._lock:
-            self._closed = True
+            with self._answers:
+                self._closed = True
+                self._answers.wait_for(lambda: self._answering == 0, ANSWER_GRACE_S)
             session, self._session = self._session, None
             for handle in self._handles + list(self._publishers.values()):
                 try:

@@ -146,6 +146,61 @@ def test_a_plain_zenoh_subscriber_gets_valid_frames_status_info_and_liveliness(w
         sub.close()
 
 
+def test_an_info_query_being_answered_when_the_sink_closes_gets_its_reply():
+    """A worker that ends closes its sink: a query already in the info callback is answered
+    before the session goes (it used to find the session closed under it and get nothing)."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    answering, proceed = threading.Event(), threading.Event()
+
+    def slow_info() -> dict:
+        answering.set()
+        proceed.wait(10)
+        return {"schema": "swarmpose.info", "camera": "cam0"}
+
+    sink = ZenohSink("cam0", slow_info, listen=[endpoint], multicast=False)
+    sub = plain_session(connect=endpoint)
+    try:
+        assert wait_until(lambda: sink.state()["peers"] == 1)
+        replies = []
+        query = threading.Thread(target=lambda: replies.extend(sub.get("swarmpose/cam0/info", timeout=10.0)))
+        query.start()
+        assert answering.wait(10)
+        closer = threading.Thread(target=sink.close)
+        closer.start()
+        closer.join(0.5)
+        assert closer.is_alive()                    # close waits for the answer in progress
+        proceed.set()
+        closer.join(10)
+        query.join(15)
+        assert [json.loads(r.ok.payload.to_bytes()) for r in replies if r.ok is not None] == [
+            {"schema": "swarmpose.info", "camera": "cam0"}]
+        assert sink.error == ""
+    finally:
+        proceed.set()
+        sink.close()
+        sub.close()
+
+
+def test_an_info_message_that_cannot_be_made_gets_an_error_reply_naming_it():
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+
+    def broken_info() -> dict:
+        raise ValueError("no intrinsics file")
+
+    sink = ZenohSink("cam0", broken_info, listen=[endpoint], multicast=False)
+    sub = plain_session(connect=endpoint)
+    try:
+        assert wait_until(lambda: sink.state()["peers"] == 1)
+        replies = list(sub.get("swarmpose/cam0/info", timeout=10.0))
+        errors = [r.err.payload.to_string() for r in replies if r.err is not None]
+        assert [r for r in replies if r.ok is not None] == []
+        assert errors == ["camera cam0: info query failed: no intrinsics file"]
+        assert sink.error == "info query failed: no intrinsics file"
+    finally:
+        sink.close()
+        sub.close()
+
+
 def test_the_client_api_delivers_by_iterator_and_callback(wave_sequence, body):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     sink = ZenohSink("cam0", lambda: {"schema": "swarmpose.info"}, listen=[endpoint], multicast=False)
@@ -227,6 +282,49 @@ def test_a_router_that_comes_later_is_connected_by_the_retry():
             router.close()
     finally:
         sink.close()
+
+
+def test_a_restarted_router_is_reconnected_and_the_lost_connection_is_reported():
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = plain_session(listen=endpoint, mode="router")
+    sink = ZenohSink("cam0", dict, mode="client", connect=[endpoint], multicast=False)
+    try:
+        assert sink.state()["routers"] == 1 and sink.state()["warning"] == ""
+        router.close()
+        assert wait_until(lambda: sink.state()["routers"] == 0)
+        assert sink.state()["warning"] == f"connection to {endpoint} lost; zenoh reconnects by itself"
+        router = plain_session(listen=endpoint, mode="router")    # the same port again
+        got = []
+        router.declare_subscriber("swarmpose/cam0/frame", lambda s: got.append(json.loads(s.payload.to_bytes())))
+        n = 0
+
+        def published() -> bool:
+            nonlocal n
+            n += 1
+            sink.frame({"frame": n}, None)
+            return bool(got)
+
+        assert wait_until(published, timeout=20.0)
+        assert sink.state()["routers"] == 1 and sink.state()["warning"] == "" and sink.unsent == 0
+    finally:
+        sink.close()
+        router.close()
+
+
+def test_a_lost_connect_endpoint_is_retried_often_unless_the_zenoh_file_says():
+    from swarmpose.publish.zenoh_link import zenoh_config
+
+    retry = json.loads(zenoh_config("client", ["tcp/127.0.0.1:7447"], multicast=False).get_json("connect/retry"))
+    assert retry == {"period_init_ms": 200, "period_max_ms": 1000, "period_increase_factor": 2.0}
+
+
+def test_a_connect_retry_in_the_zenoh_file_wins(tmp_path):
+    from swarmpose.publish.zenoh_link import zenoh_config
+
+    path = tmp_path / "zenoh.json5"
+    path.write_text("{connect: {retry: {period_init_ms: 3000, period_max_ms: 6000, period_increase_factor: 3}}}")
+    retry = json.loads(zenoh_config("client", multicast=False, config_file=str(path)).get_json("connect/retry"))
+    assert retry == {"period_init_ms": 3000, "period_max_ms": 6000, "period_increase_factor": 3.0}
 
 
 def test_peer_mode_with_an_unreachable_connect_endpoint_warns():
