@@ -20,7 +20,8 @@ from swarmpose.publish.client import Client, add_zenoh_options, format_frame, sa
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--camera", default="*", help="camera id (default: every camera)")
-    parser.add_argument("--count", type=int, default=0, help="stop after this many frames (0 = run until Ctrl-C)")
+    parser.add_argument("--count", type=int, default=0,
+                        help="stop after this many frames (0 = run until the workers end or Ctrl-C)")
     add_zenoh_options(parser)
     args = parser.parse_args()
 
@@ -34,8 +35,10 @@ def main() -> int:
         client.on_status(lambda s: say(f"status {s['camera']}: {s['state']}, {s['fps']:.1f} fps, latency "
                                        f"{s['latency_ms']['median'] or 0:.0f} ms, source {s['source']['state']}"))
         try:
-            for frame in client.frames(count=args.count or None):
+            for frame in client.frames(count=args.count or None, until_workers_end=True):
                 say(format_frame(frame))
+            if client.ended:
+                say(f"worker {', '.join(sorted(client.ended))} ended")
         except KeyboardInterrupt:
             pass
     return 0

@@ -3,14 +3,16 @@
 Errors raised on purpose (:class:`swarmpose.core.errors.SwarmposeError`) print one line on
 stderr and exit with status 2; argparse reports bad flags the same way. ``-v`` / ``-q``
 (before or after the subcommand) turn the log up (debug) or down (warnings only, no
-progress bars).
+progress bars). SIGTERM stops a command as Ctrl-C does (exit status 130, files closed).
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import sys
+import threading
 
 from swarmpose import __version__
 from swarmpose.cli.bench import add_bench_commands
@@ -22,6 +24,7 @@ from swarmpose.cli.serve import add_service_commands
 from swarmpose.cli.subscribe import add_subscribe_command
 from swarmpose.cli.synth import add_body_command, add_synth_command
 from swarmpose.cli.track import add_track_commands
+from swarmpose.cli.view import add_view_command
 from swarmpose.core.errors import SwarmposeError
 
 
@@ -42,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_bench_commands(sub, common)
     add_body_command(sub, common)
     add_personalize_command(sub, common)
+    add_view_command(sub, common)
     return parser
 
 
@@ -64,6 +68,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     args.verbosity = getattr(args, "verbose", 0) - getattr(args, "quiet", 0)
     configure_logging(args.verbosity)
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _interrupt) if main_thread else None
     try:
         return int(args.func(args) or 0)
     except SwarmposeError as exc:
@@ -72,6 +78,15 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("swarmpose: interrupted", file=sys.stderr)
         return 130
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    """SIGTERM ends a command as Ctrl-C does, so its open files are flushed and closed on the way out
+    (``serve`` and ``replay`` put their own handler in place: they stop the worker)."""
+    raise KeyboardInterrupt
 
 
 if __name__ == "__main__":

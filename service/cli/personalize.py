@@ -59,7 +59,8 @@ def add_personalize_command(sub: argparse._SubParsersAction, common: argparse.Ar
     p = sub.add_parser("personalize", aliases=["personalise"], parents=[common], formatter_class=DEFAULTS,
                        help="estimate the person's body shape from a recording and write it as GLB")
     add_source_argument(p)
-    ignored = ("frames", "overlay", "personalize", "max_people", "retire_frames")  # one person, fitted here
+    ignored = ("frames", "overlay", "personalize", "max_people", "retire_frames",  # one person, fitted here
+               "coordinates", "floor")
     add_flags(p, ServiceConfig, tuple(s for s in TRACK_SETTINGS if s not in ignored))
     p.add_argument("--frames", type=positive_int, default=60, help="frames to read from the start of the source")
     p.add_argument("--keyframes", type=positive_int, default=FitSettings.keyframes,

@@ -20,7 +20,7 @@ import time
 from contextlib import ExitStack
 from pathlib import Path
 
-from swarmpose.cli.common import DEFAULTS, quiet
+from swarmpose.cli.common import DEFAULTS, quiet, seconds
 from swarmpose.cli.settings import add_flags, load
 from swarmpose.cli.track import add_source_argument, settings_of
 from swarmpose.core.errors import ConfigError
@@ -135,5 +135,5 @@ def add_service_commands(sub: argparse._SubParsersAction, common: argparse.Argum
     p = sub.add_parser("health", parents=[common], formatter_class=DEFAULTS,
                        help="exit 0 if the worker's status file is fresh and it runs (docker HEALTHCHECK)")
     p.add_argument("--file", default=None, help="the status file (default $SWARMPOSE_HEALTH_FILE)")
-    p.add_argument("--max-age", type=float, default=15.0, help="seconds after which a status counts as stale")
+    p.add_argument("--max-age", type=seconds, default=15.0, help="seconds after which a status counts as stale")
     p.set_defaults(func=cmd_health)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from swarmpose.cli.common import DEFAULTS
+from swarmpose.cli.common import DEFAULTS, non_negative_int, seconds
 from swarmpose.core.errors import SwarmposeError
 from swarmpose.messages.describe import format_status
 from swarmpose.publish.client import Client, add_zenoh_options, format_frame, say
@@ -14,15 +14,17 @@ from swarmpose.publish.client import Client, add_zenoh_options, format_frame, sa
 def add_subscribe_args(p: argparse.ArgumentParser) -> None:
     """The flags of ``swarmpose subscribe``."""
     p.add_argument("--camera", default="*", help="camera id (default: every camera)")
-    p.add_argument("--count", type=int, default=0, help="stop after this many frames (default 0 = never)")
-    p.add_argument("--timeout", type=float, default=0.0,
+    p.add_argument("--count", type=non_negative_int, default=0, help="stop after this many frames (default 0 = never)")
+    p.add_argument("--timeout", type=seconds, default=0.0,
                    help="stop when no frame came for this many seconds (default 0 = wait forever)")
     p.add_argument("--status", action="store_true", help="also print status messages")
+    p.add_argument("--forever", action="store_true",
+                   help="keep waiting when the workers end (default: exit once every worker seen has ended)")
     add_zenoh_options(p)
 
 
 def cmd_subscribe(args: argparse.Namespace) -> int:
-    """Print frames (and optionally status) until --count frames, --timeout or Ctrl-C."""
+    """Print frames (and optionally status) until --count frames, --timeout, the workers' end or Ctrl-C."""
     try:
         client = Client(args.camera, mode=args.mode, connect=args.connect, listen=args.listen,
                         multicast=not args.no_multicast, config_file=args.zenoh_config)
@@ -35,9 +37,12 @@ def cmd_subscribe(args: argparse.Namespace) -> int:
     received = 0
     try:
         with client:
-            for message in client.frames(timeout=args.timeout or None, count=args.count or None):
+            for message in client.frames(timeout=args.timeout or None, count=args.count or None,
+                                         until_workers_end=not args.forever):
                 received += 1
                 say(format_frame(message))
+            if client.ended and not client.live and not args.forever:
+                say(f"worker {', '.join(sorted(client.ended))} ended; {received} frames received")
     except KeyboardInterrupt:
         pass
     if client.rejected:

@@ -5,6 +5,7 @@ Both run the sequential pipeline (:mod:`swarmpose.pipeline.run`): one thread, ev
 ``poses.csv``, ``poses.bvh``, ``overlay.mp4`` unless ``--no-overlay``). Exit status 1 when
 an output file could not be written or the source broke off (a truncated recording, a camera
 that vanished: a warning names it); what was tracked until then is written and reported.
+SIGINT or SIGTERM ends the run after the frame in progress, every file closed (exit status 130).
 ``eval`` refuses a source without ground truth at once (exit status 2).
 """
 
@@ -12,6 +13,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
+import sys
+import threading
 from contextlib import ExitStack
 
 from swarmpose.body.skeleton import EVAL_JOINTS
@@ -25,7 +29,10 @@ from swarmpose.pipeline.service import Parts, format_accuracy, open_parts, score
 from swarmpose.sim.evaluate import plot_accuracy
 from swarmpose.tracking.config import TrackerConfig
 
-TRACK_SETTINGS = ("source", "detector", "body", "shape", *leaves(TrackerConfig), "camera_id", "frames", "overlay")
+INTERRUPTED = 130
+"""The exit status of a run SIGINT or SIGTERM stopped (its files closed, holding every frame tracked)."""
+TRACK_SETTINGS = ("source", "detector", "body", "shape", *leaves(TrackerConfig), "camera_id", "frames", "overlay",
+                  "coordinates", "floor", "view", "view_url", "view_port", "rrd")
 """The settings ``track`` and ``eval`` take (``serve`` and ``replay`` take these and the service's)."""
 
 
@@ -47,11 +54,22 @@ def settings_of(args: argparse.Namespace, defaults: dict | None = None) -> Servi
 def run_tracking(args: argparse.Namespace, *, score: bool) -> tuple[ServiceConfig, Parts, RunSummary]:
     """Open the parts of the command's settings, track every frame into ``--out``."""
     config = settings_of(args)
+    stop = threading.Event()
     with ExitStack() as stack:
         parts = open_parts(config, stack, out=args.out or "", score=score, need_ground_truth=score)
+        if threading.current_thread() is threading.main_thread():  # SIGINT/SIGTERM: end after this frame
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                stack.callback(signal.signal, sig, signal.signal(sig, lambda *_: stop.set()))
         summary = run_sequence(parts.source, parts.pipeline, parts.sinks, camera=config.camera_id,
-                               frames=config.frames, progress=not quiet(args))
+                               frames=config.frames, progress=not quiet(args), stop=stop)
+    if summary.interrupted:
+        print("swarmpose: interrupted; the outputs hold the frames tracked so far", file=sys.stderr)
     return config, parts, summary
+
+
+def exit_status(run: RunSummary) -> int:
+    """130 when a signal stopped the run, 1 when a sink or the source failed, else 0."""
+    return INTERRUPTED if run.interrupted else 1 if run.sink_errors or run.source_error else 0
 
 
 def cmd_track(args: argparse.Namespace) -> int:
@@ -59,7 +77,7 @@ def cmd_track(args: argparse.Namespace) -> int:
     _, parts, run = run_tracking(args, score=False)
     states = ", ".join(f"{k} {v}" for k, v in sorted(run.states.items()))
     print(f"tracked {run.frames} frames ({states}) at {run.fps:.2f} frames/s; poses in {args.out}/poses.jsonl")
-    return 1 if run.sink_errors or run.source_error else 0
+    return exit_status(run)
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
@@ -68,7 +86,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     accuracy = score_summary(parts) or {"mpjpe_mm": None, "coverage": 0.0, "A": {}, "per_joint_mm": []}
     t = config.tracker
     result = {**{k: accuracy[k] for k in ("mpjpe_mm", "A", "coverage")}, "fps": run.fps, "frames": run.frames,
-              "states": run.states, "mode": t.mode, "detector": config.detector, "body": config.body,
+              "states": run.states, "mode": t.mode, "detector": parts.config.detector, "body": config.body,
               "shape": config.shape, "particles": t.particles, "generations": t.generations, "pso": t.pso,
               "depth_weight": t.depth_weight, "joints_weight": t.joints_weight, "seed": t.seed,
               "per_joint_mm": dict(zip(EVAL_JOINTS, accuracy["per_joint_mm"])), "source_error": run.source_error,
@@ -83,7 +101,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     else:
         print(f"{config.source}: mode {t.mode}, {run.frames} frames at {run.fps:.2f} frames/s")
         print("\n".join("  " + line for line in format_accuracy(accuracy)))
-    return 1 if run.sink_errors or run.source_error else 0
+    return exit_status(run)
 
 
 def add_track_commands(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:

@@ -2,6 +2,13 @@
 
 Forms:
 
+* ``auto`` (the default): ``simulated`` where the source carries recorded detections (a
+  ``swarmpose synth`` sequence, a UTD-MHAD file), else ``movenet``: a real network on a
+  user's own camera or recording;
+* ``movenet`` / ``blazepose`` (``NAME[?options]``): the network of that name, looked up by its
+  file name (:data:`NETWORKS`) in the models folders (:func:`model_folders`: ``--models`` /
+  ``$SWARMPOSE_MODELS``, then ``$XDG_DATA_HOME/swarmpose/models``, then the shared assets'
+  ``pose2d``), with the ``onnx:`` form's options;
 * ``simulated``: the detections ``swarmpose synth`` recorded (the source must be a synth
   sequence folder, whose ``ground_truth`` attribute holds them);
 * ``onnx:MODEL[?adapter=movenet|blazepose&threads=N&margin=F&refine=BOOL]``: an ONNX pose network
@@ -14,14 +21,53 @@ is used, so the simulated detector never loads onnxruntime.
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
 from urllib.parse import parse_qsl
 
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import parse_bool
 from swarmpose.detect.joints import Detector
 
-FORMS = ("simulated", "onnx:MODEL[?adapter=movenet|blazepose&threads=N&margin=F&refine=BOOL]",
+FORMS = ("auto", "movenet", "blazepose", "simulated",
+         "onnx:MODEL[?adapter=movenet|blazepose&threads=N&margin=F&refine=BOOL]",
          "openpose-json:DIR[?layout=body25|openpose18]")
+
+NETWORKS = {"movenet": "movenet_singlepose_lightning.onnx", "blazepose": "blazepose_landmark_full.onnx"}
+"""Network name -> the ONNX file it is looked up by in the models folders."""
+
+ONNX_OPTIONS = {"adapter": str, "threads": int, "margin": float, "refine": parse_bool}
+MODELS_HELP = ("put the .onnx file there or name a folder with --models DIR / SWARMPOSE_MODELS (README.md, "
+               "'Models': where the files come from), or pass --detector onnx:PATH")
+
+
+def model_folders(models: str = "") -> list[Path]:
+    """Where ``--detector movenet|blazepose`` looks, in order: ``models`` (else ``$SWARMPOSE_MODELS``),
+    ``$XDG_DATA_HOME/swarmpose/models`` (``~/.local/share/swarmpose/models``), then the shared
+    assets' ``pose2d`` (``$SWARMPOSE_ASSETS``, else ``../shared/assets`` from the working directory)."""
+    first = models or os.environ.get("SWARMPOSE_MODELS", "")
+    data = Path(os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share")
+    assets = Path(os.environ["SWARMPOSE_ASSETS"]) if os.environ.get("SWARMPOSE_ASSETS") else (
+        Path.cwd().parent / "shared" / "assets")
+    return [*([Path(first).expanduser()] if first else []), data / "swarmpose" / "models", assets / "pose2d"]
+
+
+def find_network(name: str, models: str = "") -> Path:
+    """The ONNX file of network ``name`` (a key of :data:`NETWORKS`) in the first of :func:`model_folders`
+    that holds it; ConfigError naming every folder tried and the fix otherwise."""
+    folders = model_folders(models)
+    for folder in folders:
+        if (folder / NETWORKS[name]).is_file():
+            return folder / NETWORKS[name]
+    if models and not Path(models).expanduser().is_dir():
+        raise ConfigError(f"--models {models}: no such folder; name the folder that holds {NETWORKS[name]}")
+    tried = ", ".join(str(f) for f in folders)
+    raise ConfigError(f"--detector {name}: {NETWORKS[name]} is not in any models folder ({tried}); {MODELS_HELP}")
+
+
+def has_recorded_detections(source) -> bool:
+    """Whether ``source`` carries detections the simulated detector can replay (a synth sequence, UTD-MHAD)."""
+    return getattr(source, "ground_truth", None) is not None
 
 
 def _split_options(spec: str, rest: str, allowed: dict[str, type]) -> tuple[str, dict]:
@@ -42,13 +88,29 @@ def _split_options(spec: str, rest: str, allowed: dict[str, type]) -> tuple[str,
     return path, options
 
 
-def make_detector(spec: str, source=None) -> Detector:
-    """The detector named by ``spec`` (see the module doc); ``source`` is the frame source (for ``simulated``).
-
-    Raises ConfigError for a spec of none of the forms, DetectorError when the detector
-    cannot be built (missing model, folder or ground truth).
-    """
+def resolve_detector(spec: str, source=None) -> str:
+    """``spec`` with ``auto`` made concrete: ``simulated`` for a source with recorded detections, else ``movenet``."""
     spec = spec.strip()
+    if spec != "auto":
+        return spec
+    return "simulated" if has_recorded_detections(source) else "movenet"
+
+
+def make_detector(spec: str, source=None, models: str = "") -> Detector:
+    """The detector named by ``spec`` (see the module doc); ``source`` is the frame source (for ``simulated``
+    and ``auto``); ``models``: the first folder to look for named networks in (see :func:`model_folders`).
+
+    Raises ConfigError for a spec of none of the forms or a named network not found, DetectorError when
+    the detector cannot be built (missing model, folder or ground truth).
+    """
+    spec = resolve_detector(spec, source)
+    name, _, query = spec.partition("?")
+    if name in NETWORKS:
+        from swarmpose.detect.onnx_pose import OnnxPoseDetector
+
+        path = find_network(name, models)
+        _, opts = _split_options(spec, f"{path}?{query}", ONNX_OPTIONS)
+        return OnnxPoseDetector(path, **{"adapter": name, **opts})
     if spec == "simulated":
         from swarmpose.detect.simulated import SimulatedDetector
 
@@ -57,8 +119,7 @@ def make_detector(spec: str, source=None) -> Detector:
     if spec.startswith("onnx:"):
         from swarmpose.detect.onnx_pose import OnnxPoseDetector
 
-        path, opts = _split_options(spec, spec[5:], {"adapter": str, "threads": int, "margin": float,
-                                                                  "refine": parse_bool})
+        path, opts = _split_options(spec, spec[5:], ONNX_OPTIONS)
         return OnnxPoseDetector(path, **opts)
     if spec.startswith("openpose-json:"):
         from swarmpose.detect.openpose_json import OpenPoseJsonDetector

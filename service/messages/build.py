@@ -6,8 +6,9 @@
   :mod:`swarmpose.pipeline.status`);
 * ``swarmpose.info`` — what a worker tracks and how to read it (:func:`info_message`).
 
-Units: metres (camera frame, OpenCV axes), pixels, nanoseconds, milliseconds for
-durations, radians for angles. Nothing here knows the tracker: callers pass arrays.
+Units: metres (the camera frame, OpenCV axes, or the floor-aligned world frame of
+:mod:`swarmpose.core.world`, as a frame message's ``coordinates`` says), pixels, nanoseconds,
+milliseconds for durations, radians for angles. Nothing here knows the tracker: callers pass arrays.
 """
 
 from __future__ import annotations
@@ -20,10 +21,15 @@ import numpy as np
 
 from swarmpose import __version__
 from swarmpose.body.skeleton import ANGLE_LIMITS, ANGLE_NAMES, EVAL_JOINTS, EVAL_LINKS
+from swarmpose.core.world import matrix_rows
 from swarmpose.messages.schema import MESSAGE_VERSIONS, PROTOCOL_VERSION, keys
 
 POSE_NAMES: tuple[str, ...] = ("tx", "ty", "tz", "qw", "qx", "qy", "qz") + ANGLE_NAMES
 """Names of the 36 entries of the pose vector h."""
+CAMERA_FRAME = "camera (OpenCV: x right, y down, z forward)"
+WORLD_FRAME = ("world (floor-aligned: y up, floor at y = 0, x = the camera's x on the floor, z = x cross y; "
+               "origin on the floor under the first tracked person's start); camera until known: see each "
+               "frame's coordinates")
 
 
 def json_vector(v: np.ndarray, digits: int) -> list[float] | None:
@@ -53,11 +59,15 @@ def body_message(body_id: int, state: str, reason: str, pose: np.ndarray | None,
 
 
 def frame_message(camera: str, frame: int, capture_ns: int, received_ns: int, publish_ns: int,
-                  bodies: list[dict], reason: str = "", timings_ms: Mapping[str, float] | None = None) -> dict:
-    """A ``swarmpose.frame`` message (see ``protocol/frame.schema.json``)."""
+                  bodies: list[dict], reason: str = "", timings_ms: Mapping[str, float] | None = None,
+                  coordinates: str = "camera", camera_to_world: np.ndarray | None = None) -> dict:
+    """A ``swarmpose.frame`` message (see ``protocol/frame.schema.json``). coordinates: the frame
+    of the bodies' ``position_m`` and ``pose`` (``camera`` or ``world``); camera_to_world: the
+    camera's (4, 4) transform into the world frame where known, else None."""
     message = {"schema": "swarmpose.frame", "version": MESSAGE_VERSIONS["frame"], "camera": camera, "frame": int(frame),
                "capture_ns": int(capture_ns), "received_ns": int(received_ns), "publish_ns": int(publish_ns),
-               "latency_ms": round(max(publish_ns - received_ns, 0) / 1e6, 3), "reason": reason, "bodies": bodies}
+               "latency_ms": round(max(publish_ns - received_ns, 0) / 1e6, 3), "reason": reason,
+               "coordinates": coordinates, "camera_to_world": matrix_rows(camera_to_world), "bodies": bodies}
     if timings_ms:
         message["timings_ms"] = {k: round(float(v), 2) for k, v in timings_ms.items()}
     return message
@@ -75,10 +85,13 @@ def versions() -> dict[str, str]:
 
 def info_message(camera: str, *, intrinsics=None, body=None, body_spec: str = "", source: str = "",
                  detector: str = "", mode: str = "hybrid", opencl_device: str = "",
-                 personalisation: dict | None = None) -> dict:
+                 personalisation: dict | None = None, world: dict | None = None) -> dict:
     """A ``swarmpose.info`` message. intrinsics: :class:`~swarmpose.core.camera.Intrinsics` or None
     (no frame yet); body: the tracking :class:`~swarmpose.body.skinned.SkinnedBody`;
-    personalisation: ``{"needed", "bodies"}`` with ``--personalize`` (each body's state), else None."""
+    personalisation: ``{"needed", "bodies"}`` with ``--personalize`` (each body's state), else None;
+    world: ``{"coordinates", "floor", "camera_to_world"}`` (:meth:`swarmpose.pipeline.world.WorldFrame.info`),
+    None: camera coordinates, no floor."""
+    world = world or {"coordinates": "camera", "floor": None, "camera_to_world": None}
     intr = None if intrinsics is None else {
         "width": int(intrinsics.width), "height": int(intrinsics.height), "fx": float(intrinsics.fx),
         "fy": float(intrinsics.fy), "cx": float(intrinsics.cx), "cy": float(intrinsics.cy)}
@@ -91,7 +104,7 @@ def info_message(camera: str, *, intrinsics=None, body=None, body_spec: str = ""
     limits = {n: [float(lo), float(hi)] for n, (lo, hi) in zip(ANGLE_NAMES, ANGLE_LIMITS)}
     return {"schema": "swarmpose.info", "version": MESSAGE_VERSIONS["info"], "camera": camera, "keys": keys(camera),
             "skeleton": {"joints": list(EVAL_JOINTS), "links": [list(link) for link in EVAL_LINKS], "units": "m",
-                         "frame": "camera (OpenCV: x right, y down, z forward)"},
+                         "frame": WORLD_FRAME if world["coordinates"] == "world" else CAMERA_FRAME},
             "pose_vector": {"names": list(POSE_NAMES), "limits_rad": limits},
             "intrinsics": intr, "body": body_info, "source": source, "detector": detector, "mode": mode,
-            "opencl_device": opencl_device, "versions": versions()}
+            "opencl_device": opencl_device, "world": world, "versions": versions()}

@@ -37,8 +37,10 @@ class Tracker:
 
     body: ``"builtin"``, ``"makehuman:DIR"``, a ``.glb``/``.gltf`` path, or a loaded
     :class:`~swarmpose.body.skinned.SkinnedBody`; shape: the body's shape preset or
-    measurements (spec strings only). detector: a spec (``"onnx:MODEL.onnx"``,
-    ``"openpose-json:DIR"``, ``"simulated"``) or an object with ``detect(frame, box)``;
+    measurements (spec strings only). detector: a spec (``"auto"``: the recorded detections
+    of a ``source`` that has them, else ``"movenet"``; ``"movenet"``/``"blazepose"`` from the
+    models folder, ``$SWARMPOSE_MODELS`` first; ``"onnx:MODEL.onnx"``, ``"openpose-json:DIR"``,
+    ``"simulated"``) or an object with ``detect(frame, box)``;
     a detector made from a spec is the tracker's and closed with it. intrinsics: the
     camera (needed by :meth:`track`; :meth:`track_frame` takes each frame's own). source:
     the frame source, needed by the ``simulated`` detector (it replays the recorded
@@ -51,7 +53,7 @@ class Tracker:
     and restarts a track that fails. Use it as a context manager, or call :meth:`close`.
     """
 
-    def __init__(self, body: str | SkinnedBody = "builtin", detector: str | Detector = "simulated",
+    def __init__(self, body: str | SkinnedBody = "builtin", detector: str | Detector = "auto",
                  intrinsics: Intrinsics | None = None, *, shape: str | None = None,
                  source: FrameSource | None = None, config: TrackerConfig | None = None, **settings: Any):
         self.config = with_settings(config or TrackerConfig(), **settings)
@@ -125,7 +127,7 @@ class Tracker:
         self.close()
 
 
-def track(source: str | FrameSource, *, body: str | SkinnedBody = "builtin", detector: str | Detector = "simulated",
+def track(source: str | FrameSource, *, body: str | SkinnedBody = "builtin", detector: str | Detector = "auto",
           shape: str | None = None, frames: int = 0, **settings: Any) -> Iterator[FrameResult]:
     """Track every frame of ``source`` (a URI such as ``"folder:DIR"``, ``"mkv:FILE"``,
     ``"realsense:"``, or an open source), yielding a :class:`FrameResult` per frame; at most

@@ -42,8 +42,12 @@ class ServiceConfig:
     :class:`swarmpose.Tracker`, for the settings it shares)."""
 
     source: str = setting("", f"frame source: {SOURCE_FORMS}")
-    detector: str = setting("simulated", "2D joints: simulated | onnx:MODEL.onnx[?adapter=...] | "
-                                         "openpose-json:DIR[?layout=...]", aliases=("joints",))
+    detector: str = setting("auto", "2D joints: auto (simulated where the source recorded detections, else "
+                                    "movenet) | movenet | blazepose (from the models folder) | simulated | "
+                                    "onnx:MODEL.onnx[?adapter=...] | openpose-json:DIR[?layout=...]",
+                            aliases=("joints",))
+    models: str = setting("", "the folder --detector movenet|blazepose load their .onnx from first (then "
+                              "~/.local/share/swarmpose/models, then ../shared/assets/pose2d)")
     body: str = setting("builtin", "body model: builtin, makehuman:DIR or a .glb/.gltf file")
     shape: str = setting("", "body shape: a preset (male, female, male-heavy, ...), height=1.8,torso=1.1,... "
                              "(builtin) or gender=0.3,weight=0.8,... (MakeHuman sliders 0..1) (empty: the body's "
@@ -52,6 +56,12 @@ class ServiceConfig:
     camera_id: str = setting("camera0", "the <camera> of the zenoh keys swarmpose/<camera>/... and of every message")
     frames: int = setting(0, "stop after this many frames (0 = all)", minimum=0, aliases=("max_frames",))
     overlay: bool = setting(True, "write overlay.mp4 (the skeleton over the colour video) with the other files")
+    coordinates: str = setting("camera", "the frame of the joints and poses in messages, poses.jsonl and poses.csv: "
+                                         "camera (OpenCV axes) or world (floor-aligned: y up, floor at y = 0, origin "
+                                         "under the first tracked person; needs a floor)", choices=("camera", "world"))
+    floor: str = setting("auto", "the floor of the world frame: auto (fitted to the depth), off (no world frame) or "
+                                 "an extrinsics JSON file ({camera_to_world}, {floor: {normal, offset_m}} or "
+                                 "{camera_height_m, pitch_deg, roll_deg}); poses.bvh stands on it where known")
     zenoh: ZenohConfig = section(ZenohConfig, "zenoh publishing")
     rate: float = setting(0.0, "deliver a recording at this many frames/s (0: as recorded for serve, as fast as "
                                "possible otherwise; live cameras set their own rate)", minimum=0.0)
@@ -61,6 +71,14 @@ class ServiceConfig:
     health_file: str = setting("", "also write each status message here (for `swarmpose health`)")
     reopen_s: float = setting(5.0, "seconds between attempts to reopen a failed live source or zenoh router",
                               minimum=0.0)
+    view: bool = setting(False, "show the run live in a rerun 3D viewer: spawns one where there is a display, "
+                                "else serves it on --view-port for `rerun rerun+http://HOST:PORT/proxy` elsewhere")
+    view_url: str = setting("", "--view: stream to the rerun viewer already listening here instead, e.g. "
+                                "rerun+http://laptop:9876/proxy")
+    view_port: int = setting(9876, "--view: port of the spawned viewer, or of the view served when there is no "
+                                   "display", minimum=1, maximum=65535)
+    rrd: str = setting("", "also write the rerun recording (depth, image, skeletons) to this .rrd file "
+                           "(open it with `rerun FILE.rrd`)")
 
     def __post_init__(self) -> None:
         check_camera_id(self.camera_id)

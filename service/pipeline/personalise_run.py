@@ -47,7 +47,7 @@ def collect_samples(config: ServiceConfig, space: ShapeSpace, frames: int,
     with ExitStack() as stack:
         source = open_source(config.source)
         stack.callback(source.close)
-        detector = make_detector(config.detector, source)
+        detector = make_detector(config.detector, source, config.models)
         stack.callback(detector.close)
         pipeline = FramePipeline(detector, lambda k, body_id: BodyTracker(body, k, tracker_config, body_id=body_id))
         frames_of: dict[int, Frame] = {}

@@ -11,6 +11,7 @@ fails is logged and dropped; the others go on. A source that ends with ``status`
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -29,13 +30,17 @@ _END = object()
 class RunSummary:
     """What a run went through: frames, counts per state (init / tracking / lost / skipped),
     the wall time (s) of detection + tracking, the errors of sinks that failed, and the
-    source's ``"error: …"`` status when it ended by failing ('' when it did not)."""
+    source's ``"error: …"`` status when it ended by failing ('' when it did not); interrupted:
+    a stop request ended it before the source did; nobody_reason: the reason of the first
+    frame read in which nobody was found ('' while there is none)."""
 
     frames: int = 0
     states: dict[str, int] = field(default_factory=dict)
     seconds: float = 0.0
     sink_errors: list[str] = field(default_factory=list)
     source_error: str = ""
+    interrupted: bool = False
+    nobody_reason: str = ""
 
     @property
     def fps(self) -> float:
@@ -43,7 +48,14 @@ class RunSummary:
         tracked = sum(v for k, v in self.states.items() if k != "skipped")
         return tracked / self.seconds if self.seconds > 0 else 0.0
 
+    @property
+    def tracked(self) -> int:
+        """Frames in which a body was found (state init or tracking)."""
+        return sum(v for k, v in self.states.items() if k not in ("lost", "skipped"))
+
     def count(self, result: FrameResult, seconds: float) -> None:
+        if not (result.skipped or result.bodies or self.nobody_reason):
+            self.nobody_reason = f"frame {result.index}: {result.reason}"
         self.frames += 1
         self.states[result.state] = self.states.get(result.state, 0) + 1
         self.seconds += seconds
@@ -66,8 +78,11 @@ def results(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline, fra
 
 
 def run_sequence(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline, sinks: Sequence[Sink] = (), *,
-                 camera: str = "camera0", frames: int = 0, progress: bool = True) -> RunSummary:
-    """Track ``source`` frame by frame, handing each frame message to ``sinks``; closes the sinks."""
+                 camera: str = "camera0", frames: int = 0, progress: bool = True,
+                 stop: threading.Event | None = None) -> RunSummary:
+    """Track ``source`` frame by frame, handing each frame message to ``sinks``; closes the sinks.
+    ``stop`` (set from a signal handler) ends the run after the frame in progress, which every
+    sink gets, so the files hold the same frames."""
     summary = RunSummary()
     live = list(sinks)
     total = frames or getattr(source, "length", None) or None
@@ -86,7 +101,13 @@ def run_sequence(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline
                         summary.sink_errors.append(what)
                         live.remove(sink)
                 bar.update(1)
-        summary.source_error = source_error(source)
+                if stop is not None and stop.is_set():
+                    summary.interrupted = True
+                    break
+        summary.source_error = "" if summary.interrupted else source_error(source)
+        if summary.frames and not summary.tracked and summary.nobody_reason:
+            log.warning("nobody was tracked in the %d frames read (%s); each frame's message says why",
+                        summary.frames, summary.nobody_reason)
     finally:
         for sink in sinks:
             try:

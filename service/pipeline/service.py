@@ -9,8 +9,9 @@ caller's ``ExitStack``.
 
 from __future__ import annotations
 
+import logging
 from contextlib import ExitStack
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from swarmpose.body.loader import load_body
@@ -19,13 +20,15 @@ from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.progress import progress_bar
 from swarmpose.detect.joints import Detector
-from swarmpose.detect.registry import make_detector
+from swarmpose.detect.registry import make_detector, resolve_detector
 from swarmpose.messages.build import info_message
 from swarmpose.pipeline.config import ServiceConfig
 from swarmpose.pipeline.status import HealthFileSink, LogSink, WorkerStats, latency_summary
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.pipeline.worker import Worker
+from swarmpose.pipeline.world import make_world
 from swarmpose.publish.files import open_recording
+from swarmpose.publish.rerun_view import open_view_sink
 from swarmpose.publish.sink import Sink
 from swarmpose.publish.zenoh_link import ZenohSink
 from swarmpose.sim.scoring import ScoreSink
@@ -33,6 +36,8 @@ from swarmpose.sources.base import Frame, FrameSource
 from swarmpose.sources.registry import open_source
 from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.online_personalise import PersonalisingTracker
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -74,7 +79,20 @@ def make_pipeline(body: SkinnedBody, detector: Detector, config: ServiceConfig,
         def make(intrinsics, body_id):
             return BodyTracker(body, intrinsics, t, body_id=body_id)
     return FramePipeline(detector, make, t.max_people, t.retire_frames,
-                         personalise_frames=t.personalize if space is not None else 0)
+                         personalise_frames=t.personalize if space is not None else 0,
+                         world=make_world(config.floor, config.coordinates))
+
+
+def warn_of_another_body(source: FrameSource, body: SkinnedBody, config: ServiceConfig) -> None:
+    """A warning when ``source`` was rendered with another body than the one tracking it (a
+    ``swarmpose synth`` sequence records its body in ``sequence.json``): the shape mismatch
+    then adds to every joint error."""
+    recorded = getattr(source, "recorded_body", "")
+    if recorded and recorded != body.name and config.tracker.personalize == 0:
+        log.warning("%s was rendered with the body %s, and is tracked with %s (--body %s%s): the errors include "
+                    "the difference of shape; pass the recorded body (e.g. --body makehuman:DIR --shape NAME) to "
+                    "measure the tracker alone", source.uri, recorded, body.name, config.body,
+                    f" --shape {config.shape}" if config.shape else "")
 
 
 def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score: bool = True,
@@ -93,8 +111,10 @@ def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score:
         body = load_body(config.body, config.shape or None)
     source = open_source(config.source)
     stack.callback(source.close)
-    detector = make_detector(config.detector, source)
+    config = replace(config, detector=resolve_detector(config.detector, source))  # what "auto" picked
+    detector = make_detector(config.detector, source, config.models)
     stack.callback(detector.close)
+    warn_of_another_body(source, body, config)
     ground_truth = getattr(source, "ground_truth", None)
     if need_ground_truth and ground_truth is None:
         raise ConfigError(f"{config.source} has no ground truth (groundtruth.jsonl): eval needs a sequence folder "
@@ -108,6 +128,12 @@ def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score:
             stack.callback(sink.close)
         parts.sinks.extend(recording)
         parts.recording = recording
+    view = open_view_sink(config.camera_id, rrd=config.rrd, view=config.view, url=config.view_url,
+                          port=config.view_port, live=source.live)
+    if view is not None:  # the rerun viewer / .rrd (--view, --rrd)
+        stack.callback(view.close)
+        parts.sinks.append(view)
+        parts.recording += [view] if config.rrd else []
     if score and ground_truth is not None:
         parts.score = ScoreSink(ground_truth)
         parts.sinks.append(parts.score)
@@ -143,9 +169,10 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
         snapshot = worker.stats.personalisation if worker is not None else {}  # the tracking thread's copy
         return info_message(config.camera_id, intrinsics=parts.pipeline.intrinsics,
                             body=tracker.body if tracker is not None else parts.body,
-                            body_spec=config.body, source=config.source, detector=config.detector,
+                            body_spec=config.body, source=config.source, detector=parts.config.detector,
                             mode=config.tracker.mode, opencl_device=parts.pipeline.device_name,
-                            personalisation=snapshot or None)
+                            personalisation=snapshot or None,
+                            world=None if parts.pipeline.world is None else parts.pipeline.world.info())
 
     zenoh = None
     z = config.zenoh
@@ -167,7 +194,7 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
     worker = Worker(lambda: open_source(uri), parts.pipeline, sinks, camera=config.camera_id, drop_stale=not replay,
                     pace_fps=pace, loop=config.loop and not replay, frames=config.frames,
                     status_period_s=config.status_period_s, reopen_s=config.reopen_s, source_uri=uri,
-                    detector_spec=config.detector, zenoh_state=zenoh.state if zenoh else None, source=parts.source)
+                    detector_spec=parts.config.detector, zenoh_state=zenoh.state if zenoh else None, source=parts.source)
     return worker, parts, zenoh
 
 

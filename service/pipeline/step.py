@@ -16,6 +16,10 @@ With ``max_people`` > 1 the detection half first finds the people in the depth
 (:func:`swarmpose.detect.per_person.detect_each`); the tracking half gives them to a
 :class:`~swarmpose.tracking.people_tracker.PeopleTracker` (one track and id per person).
 Where the segmentation finds nobody, the frame is detected and tracked as with one person.
+
+With a :class:`~swarmpose.pipeline.world.WorldFrame` (``--floor``), the detection half fits the
+floor until it is known and the tracking half sets the world origin under the first tracked
+person; every result carries the world state and the coordinates wanted in its message.
 """
 
 from __future__ import annotations
@@ -24,16 +28,18 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from swarmpose.core.camera import Intrinsics
-from swarmpose.core.errors import SwarmposeError
+from swarmpose.core.errors import ConfigError, SwarmposeError
 from swarmpose.detect.floor import FloorPlane
 from swarmpose.detect.joints import Detector, Joints2D
 from swarmpose.detect.people import Segmentation, segment_people
 from swarmpose.detect.per_person import PersonDetection, detect_each
+from swarmpose.gpu.errors import DeviceError
+from swarmpose.pipeline.world import WorldFrame
 from swarmpose.sources.base import Frame, SkippedFrame, exc_message
 from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.people_tracker import PeopleTracker
@@ -43,6 +49,7 @@ log = logging.getLogger(__name__)
 FLOOR_REFIT_FRAMES = 15
 """The floor plane is fitted again every this many frames (8 ms a fit; a camera may move)."""
 NOBODY = "no person found (none in the depth whose detection shows a person)"
+EMPTY_DEPTH = "the depth image has no valid pixels (every one 0: no measurement)"
 
 
 @dataclass
@@ -92,15 +99,18 @@ class FramePipeline:
     body id; max_people: 1 tracks one person (no segmentation), more tracks each person the
     depth segmentation finds, up to this many; retire_frames: frames a person may go unseen
     before its id is retired; personalise_frames: N when ``make_tracker`` builds trackers that
-    personalise their body from N frames (``--personalize``), else 0. ``detect`` and ``track``
-    may run in two threads (one each).
+    personalise their body from N frames (``--personalize``), else 0; world: the camera's
+    world frame (floor, origin, coordinates of the messages), None: camera frame only.
+    ``detect`` and ``track`` may run in two threads (one each).
     """
 
     def __init__(self, detector: Detector, make_tracker: Callable[[Intrinsics, int], BodyTracker],
-                 max_people: int = 1, retire_frames: int = 30, personalise_frames: int = 0):
+                 max_people: int = 1, retire_frames: int = 30, personalise_frames: int = 0,
+                 world: WorldFrame | None = None):
         self.detector, self.make_tracker = detector, make_tracker
         self.max_people, self.retire_frames = int(max_people), int(retire_frames)
         self.personalise_frames = int(personalise_frames)
+        self.world = world
         self.tracker: BodyTracker | None = None
         self.people: PeopleTracker | None = None
         self.intrinsics: Intrinsics | None = None
@@ -108,6 +118,7 @@ class FramePipeline:
         self._boxes: list[np.ndarray] = []  # the last frame's tracked bodies' joint boxes (several people)
         self._floor = FloorCache()
         self._box_lock = threading.Lock()
+        self._warned_empty = False  # a depth image without valid pixels is logged once
 
     @property
     def device_name(self) -> str:
@@ -132,6 +143,16 @@ class FramePipeline:
     def detect(self, frame: Frame) -> Detection:
         """2D joints of ``frame``: of each person the depth shows (``max_people`` > 1), else of
         the one person, looking first where the last tracked body was."""
+        t0 = time.perf_counter()
+        detection = self._detect(frame)
+        if self.world is not None:  # the floor until known (the segmentation's own fit where it made one)
+            seg = detection.segmentation
+            self.world.observe_depth(frame, seg.floor if seg is not None else None)
+            detection.ms = 1000 * (time.perf_counter() - t0)
+        return detection
+
+    def _detect(self, frame: Frame) -> Detection:
+        """:meth:`detect` without the floor of the world frame."""
         t0 = time.perf_counter()
         segmentation = None
         if self.max_people > 1:
@@ -160,12 +181,30 @@ class FramePipeline:
         except Exception as exc:  # a detector that throws: the frame goes on without joints
             joints, note = None, f"detector failed: {exc_message(exc)}"
             log.debug("frame %d: %s", frame.index, note)
+        if not np.any(frame.depth > 0):  # 0 (and NaN) = no measurement: nobody can be found in it
+            note = "; ".join(n for n in (note, EMPTY_DEPTH) if n)
+            if not self._warned_empty:
+                self._warned_empty = True
+                log.warning("frame %d: %s; check the depth stream (units, registration to colour); such frames "
+                            "are tracked as having nobody in view", frame.index, EMPTY_DEPTH)
         people = (PersonDetection(None, joints, note),) if self.max_people > 1 else None
         return Detection(joints, note, 1000 * (time.perf_counter() - t0), people, segmentation)
 
     def track(self, frame: Frame, detection: Detection, received_ns: int = 0) -> FrameResult:
         """The bodies of ``frame`` given its detection; never raises for a frame it cannot track.
         received_ns: wall-clock time (ns) the frame was taken from its source (0: unknown)."""
+        result = self._track(frame, detection, received_ns)
+        return result if self.world is None else self.in_world(result)
+
+    def in_world(self, result: FrameResult) -> FrameResult:
+        """``result`` with the world state as known after it (the origin set by its first tracked
+        body if still unknown) and the coordinates its message should use."""
+        if self.world is None:
+            return result
+        return replace(result, world=self.world.observe_bodies(result.bodies), coordinates=self.world.coordinates)
+
+    def _track(self, frame: Frame, detection: Detection, received_ns: int) -> FrameResult:
+        """:meth:`track` without the world frame."""
         t0 = time.perf_counter()
         if detection.people is not None:
             return self._track_people(frame, detection, received_ns, t0)
@@ -219,7 +258,10 @@ class FramePipeline:
     def _failed(self, frame: Frame, detection: Detection, exc: BaseException, received_ns: int,
                 t0: float) -> FrameResult:
         """The result of a frame whose tracking threw: no bodies, the reason, and no box to
-        look in next (the tracks restart from the next detection)."""
+        look in next (the tracks restart from the next detection). A setting no frame can be tracked
+        with (an OpenCL device that is not there, a bad option) is raised: the run stops on it."""
+        if isinstance(exc, (ConfigError, DeviceError)):
+            raise exc
         with self._box_lock:
             self._box, self._boxes = None, []
         reason = "; ".join(r for r in (detection.note, f"tracking failed: {describe_error(exc)}") if r)
@@ -231,7 +273,7 @@ class FramePipeline:
         """Detect and track one source item (a skipped frame gives a result saying why)."""
         received_ns = time.time_ns()
         if isinstance(item, SkippedFrame):
-            return skipped_result(item, received_ns)
+            return self.in_world(skipped_result(item, received_ns))
         return self.track(item, self.detect(item), received_ns)
 
     def reset(self) -> None:

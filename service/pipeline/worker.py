@@ -137,7 +137,7 @@ class Worker:
         """Run until done; sends a status every period and a last one at the end. Closes the sinks."""
         threads = [threading.Thread(target=self._guard, args=(fn,), name=f"swarmpose {name}", daemon=True)
                    for name, fn in (("acquire", self._acquire), ("detect", self._detect), ("track", self._track))]
-        self._set_state("running")
+        # "starting" until the first frame is published (opening the source, compiling the kernels, the first fit)
         for t in threads:
             t.start()
         try:
@@ -279,7 +279,7 @@ class Worker:
         """The frame result of one received item, counted."""
         if isinstance(got.item, SkippedFrame):
             self.stats.update(skipped=1)
-            return skipped_result(got.item, got.received_ns)
+            return self.pipeline.in_world(skipped_result(got.item, got.received_ns))
         result = self.pipeline.track(got.item, got.detection, got.received_ns)
         personalisation = self.pipeline.personalisation
         if personalisation is not None:  # --personalize: every body's state, none once everybody has left
@@ -306,6 +306,8 @@ class Worker:
                 self.sink_errors.append(what)
                 self.report(f"{what}; it gets no more messages")
         self.stats.update(latency_ms=message["latency_ms"], published=1, period_published=1)
+        if self.state == "starting":
+            self._set_state("running")
 
     # ------------------------------------------------------------------ status
     def status_message(self) -> dict:

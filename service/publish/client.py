@@ -24,11 +24,15 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 
+import zenoh
+
 from swarmpose.core.errors import ProtocolError
 from swarmpose.messages import check_camera_id, decode, keys, validate
 from swarmpose.publish.zenoh_link import open_session, zenoh_config
 
 QUEUE_SIZE = 256
+_WORKERS_ENDED: dict = {"schema": "swarmpose.client.workers-ended"}
+"""Queued after the last live worker's liveliness token went away (ends ``frames(until_workers_end=True)``)."""
 
 
 class Client:
@@ -37,7 +41,9 @@ class Client:
     mode: peer (default) or client (through a router); connect / listen: zenoh endpoints;
     multicast: multicast scouting; config_file: a zenoh JSON5 file; validate: check every
     message against its schema. The iterator keeps at most 256 frames; older ones are
-    dropped when the consumer falls behind (counted in ``dropped``).
+    dropped when the consumer falls behind (counted in ``dropped``). The client follows the
+    workers' liveliness tokens: ``live`` holds the cameras whose worker runs, ``ended`` those
+    whose worker has stopped (or vanished) since the client saw it.
     """
 
     def __init__(self, camera: str = "*", *, mode: str = "peer", connect: Sequence[str] = (),
@@ -51,8 +57,12 @@ class Client:
         self._callbacks: dict[str, list[Callable[[dict], None]]] = {"frame": [], "status": []}
         self._lock = threading.Lock()
         self.session = open_session(zenoh_config(mode, connect, listen, multicast, config_file), "client")
+        self.live: set[str] = set()
+        self.ended: set[str] = set()
         self._subscribers = [self.session.declare_subscriber(self.keys["frame"], self._on("frame")),
-                             self.session.declare_subscriber(self.keys["status"], self._on("status"))]
+                             self.session.declare_subscriber(self.keys["status"], self._on("status")),
+                             self.session.liveliness().declare_subscriber(self.keys["alive"], self._on_alive,
+                                                                          history=True)]
 
     # ------------------------------------------------------------------ receiving
     def _on(self, kind: str) -> Callable:
@@ -77,6 +87,20 @@ class Client:
                     self.last_error = f"{kind} callback raised {type(exc).__name__}: {exc}"
         return handler
 
+    def _on_alive(self, sample) -> None:
+        """A worker's liveliness token appeared (PUT) or went away (DELETE: it stopped or vanished)."""
+        camera = str(sample.key_expr).split("/")[1]
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.DELETE:
+                if camera in self.live:
+                    self.live.discard(camera)
+                    self.ended.add(camera)
+                    if not self.live:
+                        self._enqueue(_WORKERS_ENDED)
+            else:
+                self.live.add(camera)
+                self.ended.discard(camera)
+
     def _enqueue(self, message: dict) -> None:
         while True:
             try:
@@ -97,15 +121,21 @@ class Client:
         """Call ``callback(status_message)`` for every status message."""
         self._callbacks["status"].append(callback)
 
-    def frames(self, timeout: float | None = None, count: int | None = None) -> Iterator[dict]:
-        """Frame messages as they arrive; stops after ``count`` frames, or when none came for
-        ``timeout`` seconds (None: wait forever)."""
+    def frames(self, timeout: float | None = None, count: int | None = None,
+               until_workers_end: bool = False) -> Iterator[dict]:
+        """Frame messages as they arrive; stops after ``count`` frames, when none came for
+        ``timeout`` seconds (None: wait forever), or, with ``until_workers_end``, once every
+        worker the client had seen has ended (the frames they sent before are delivered first)."""
         got = 0
         while count is None or got < count:
             try:
                 message = self._frames.get(timeout=timeout)
             except queue.Empty:
                 return
+            if message is _WORKERS_ENDED:
+                if until_workers_end and not self.live:
+                    return
+                continue
             got += 1
             yield message
 

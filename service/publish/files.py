@@ -5,99 +5,56 @@ a run that dies leaves files holding every frame written so far:
 
 * :class:`JsonlSink` — each frame message (``protocol/frame.schema.json``) as one compact
   JSON line;
-* :class:`CsvSink` — one row per frame and body (:data:`CSV_COLUMNS`): metres in the camera
-  frame (OpenCV: x right, y down, z forward), pixels, the 36-D pose; empty cells where a
-  value is unknown;
+* :class:`CsvSink` — one row per frame and body (:data:`CSV_COLUMNS`): metres in the frame
+  the message's ``coordinates`` names (the camera frame, OpenCV: x right, y down, z forward,
+  or the floor-aligned world frame, y up; the ``coordinates`` column says which), pixels, the
+  36-D pose; empty cells where a value is unknown;
 * :class:`BvhSink` — one body id's animation of the tracking body's bone rig, centimetres,
-  Y up; :class:`PerIdBvhSink` keeps one per id: ``poses.bvh`` for id 0, ``poses_id<N>.bvh``
-  for id N, created when N first appears;
+  Y up, standing on the floor in the world frame wherever the message knows it
+  (``camera_to_world``); :class:`PerIdBvhSink` keeps one per id: ``poses.bvh`` for id 0,
+  ``poses_id<N>.bvh`` for id N, created when N first appears;
 * :class:`~swarmpose.publish.overlay.OverlaySink` — every body's skeleton drawn over the video.
 
-:func:`open_recording` opens all of them in one folder. A file that cannot be created or
+:func:`open_recording` opens all of them in one folder. The BVH sinks live in
+:mod:`swarmpose.publish.bvh_file` (imported here as before). A file that cannot be created or
 written raises :class:`~swarmpose.core.errors.OutputError` naming it.
 """
 
 from __future__ import annotations
 
 import csv
-import warnings
 from pathlib import Path
-from typing import IO
 
-import numpy as np
-from scipy.spatial.transform import Rotation
-
-from swarmpose.body.kinematics import forward_kinematics
 from swarmpose.body.skeleton import EVAL_JOINTS, POSE_DIM
 from swarmpose.body.skinned import SkinnedBody
-from swarmpose.core.errors import OutputError, ShapeError
+from swarmpose.core.errors import OutputError
 from swarmpose.messages import POSE_NAMES, encode
+from swarmpose.publish.bvh_file import (
+    BVH_UNITS_PER_M,
+    CAMERA_TO_BVH,
+    UPRIGHT,
+    BvhSink,
+    PerIdBvhSink,
+    bvh_path,
+    bvh_transform,
+)
+from swarmpose.publish.file_sink import FileSink, write_error
 from swarmpose.publish.overlay import OverlaySink
 from swarmpose.publish.sink import Sink
 from swarmpose.sources.base import Frame
 
-FRAME_COLUMNS: tuple[str, ...] = ("frame", "capture_ns", "received_ns", "publish_ns", "latency_ms")
+FRAME_COLUMNS: tuple[str, ...] = ("frame", "capture_ns", "received_ns", "publish_ns", "latency_ms", "coordinates")
 BODY_COLUMNS: tuple[str, ...] = ("body_id", "state", "reason")
 JOINT_FIELDS: tuple[str, ...] = ("x", "y", "z", "u", "v", "confidence")
 CSV_COLUMNS: tuple[str, ...] = (FRAME_COLUMNS + BODY_COLUMNS
                                 + tuple(f"{j}_{f}" for j in EVAL_JOINTS for f in JOINT_FIELDS)
                                 + POSE_NAMES + ("objective",))
-"""Columns of poses.csv: frame fields, body fields, per evaluation joint x y z (m, camera frame),
-u v (px) and confidence, the 36 pose entries, and ``objective`` (E of the chosen pose)."""
-
-CAMERA_TO_BVH = np.diag([1.0, -1.0, -1.0])
-"""Camera frame (y down, z forward) -> BVH world (Y up): 180 degrees about x."""
-BVH_UNITS_PER_M = 100.0
-FRAMES_WIDTH = 10
-"""Digits reserved for the ``Frames:`` count, rewritten in place after every frame."""
-UPRIGHT = (0.0, 1.0, 0.0, 0.0)
-"""Root quaternion of a body upright facing the camera (upright, facing +Z, in the BVH)."""
+"""Columns of poses.csv: frame fields (``coordinates``: ``camera`` or ``world``, the frame of the
+row's metres and pose), body fields, per evaluation joint x y z (m), u v (px) and confidence,
+the 36 pose entries, and ``objective`` (E of the chosen pose)."""
 
 
-def _error(what: str, path: Path, exc: BaseException) -> OutputError:
-    reason = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
-    return OutputError(f"cannot write {what} {path}: {reason}; choose a writable output folder with free space")
-
-
-class _FileSink:
-    """A sink writing one file: opened at construction, flushed per frame, closed once."""
-
-    what = "file"
-
-    def __init__(self, path: str | Path, mode: str, **kwargs) -> None:
-        self.path = Path(path)
-        self.frames = 0
-        self._closed = False
-        try:
-            self._file: IO = open(self.path, mode, **kwargs)  # held open until close()
-        except OSError as exc:
-            raise _error(self.what, self.path, exc) from exc
-
-    def _check_open(self) -> None:
-        if self._closed:
-            raise OutputError(f"{self.what} {self.path} is closed; open a new sink to write more frames")
-
-    def _flush(self) -> None:
-        try:
-            self._file.flush()
-        except OSError as exc:
-            raise _error(self.what, self.path, exc) from exc
-
-    def status(self, message: dict) -> None:
-        """Status messages are not recorded."""
-
-    def close(self) -> None:
-        """Flush and close the file (idempotent)."""
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            self._file.close()
-        except OSError as exc:
-            raise _error(self.what, self.path, exc) from exc
-
-
-class JsonlSink(_FileSink):
+class JsonlSink(FileSink):
     """``poses.jsonl``: every frame message as one compact UTF-8 JSON line, flushed at once."""
 
     what = "the JSON lines file"
@@ -112,7 +69,7 @@ class JsonlSink(_FileSink):
         try:
             self._file.write(line)
         except OSError as exc:
-            raise _error(self.what, self.path, exc) from exc
+            raise write_error(self.what, self.path, exc) from exc
         self._flush()
         self.frames += 1
 
@@ -124,7 +81,7 @@ def _cells(values, count: int) -> list:
 def csv_rows(message: dict) -> list[list]:
     """The poses.csv rows (each in :data:`CSV_COLUMNS` order) of one frame message: one per
     body, or one with empty body cells (and the frame's reason) when there is none."""
-    head = [message.get(c, "") for c in FRAME_COLUMNS]
+    head = [message.get(c, "camera" if c == "coordinates" else "") for c in FRAME_COLUMNS]
     bodies = message.get("bodies") or []
     if not bodies:
         return [head + ["", "", message.get("reason", "")] + [""] * (len(CSV_COLUMNS) - len(head) - 3)]
@@ -142,7 +99,7 @@ def csv_rows(message: dict) -> list[list]:
     return rows
 
 
-class CsvSink(_FileSink):
+class CsvSink(FileSink):
     """``poses.csv``: a header of :data:`CSV_COLUMNS`, then :func:`csv_rows` of every frame."""
 
     what = "the CSV file"
@@ -153,7 +110,7 @@ class CsvSink(_FileSink):
         try:
             self._writer.writerow(CSV_COLUMNS)
         except OSError as exc:
-            raise _error(self.what, self.path, exc) from exc
+            raise write_error(self.what, self.path, exc) from exc
         self._flush()
 
     def frame(self, message: dict, frame: Frame | None = None) -> None:
@@ -162,219 +119,9 @@ class CsvSink(_FileSink):
         try:
             self._writer.writerows(csv_rows(message))
         except OSError as exc:
-            raise _error(self.what, self.path, exc) from exc
+            raise write_error(self.what, self.path, exc) from exc
         self._flush()
         self.frames += 1
-
-
-def depth_first(parents: np.ndarray) -> list[int]:
-    """Bone indices (B,) in depth-first order (children in index order): the order BVH lists them."""
-    children: list[list[int]] = [[] for _ in parents]
-    for bone, parent in enumerate(parents):
-        if parent >= 0:
-            children[int(parent)].append(bone)
-    order, stack = [], [0]
-    while stack:
-        bone = stack.pop()
-        order.append(bone)
-        stack.extend(reversed(children[bone]))
-    return order
-
-
-def _numbers(values) -> str:
-    return " ".join(f"{round(float(v), 6) + 0.0:.6f}" for v in values)  # + 0.0 turns -0.0 into 0.0
-
-
-def bvh_path(out_dir: str | Path, body_id: int) -> Path:
-    """The BVH file of body id ``body_id`` in ``out_dir``: ``poses.bvh`` for id 0 (what a run of
-    one person writes), ``poses_id<N>.bvh`` for id N."""
-    return Path(out_dir) / ("poses.bvh" if body_id == 0 else f"poses_id{body_id}.bvh")
-
-
-def _check_id(body_id, what: str) -> int:
-    """``body_id`` as an int; OutputError naming ``what`` unless it is an integer >= 0."""
-    if isinstance(body_id, bool) or not isinstance(body_id, (int, np.integer)) or body_id < 0:
-        raise OutputError(f"{what}: body id {body_id!r} is not an integer >= 0, so it names no BVH file; "
-                          "give every body a track id as protocol/frame.schema.json says")
-    return int(body_id)
-
-
-class BvhSink(_FileSink):
-    """A BVH file of one body id's pose per frame as an animation of ``body``'s bone rig.
-
-    Units centimetres; world frame Y up (the camera frame turned 180 degrees about x, so
-    x right, y up, z towards the camera). ROOT = bone 0 with position and ZXY rotation
-    channels, every other bone a JOINT with ZXY rotation channels; OFFSETs are the rest
-    bone heads relative to the parent's (the root's is zero: its position channels place
-    it), leaf bones end in an End Site along the bone. Each bone's rotation is its delta
-    from the rest pose, so all angles zero is the body's rest pose standing upright.
-    One MOTION row per frame message, from the body of that message whose ``id`` is
-    ``body_id`` (the first such); a frame without its pose (no body of that id, pose null)
-    repeats the last row, or before any pose shows the rest pose upright at the origin. Frame
-    Time is ``1 / fps``. The ``Frames:`` count is rewritten in place after every row, so the
-    file is a complete BVH after every frame.
-    """
-
-    what = "the BVH file"
-
-    def __init__(self, path: str | Path, body: SkinnedBody, fps: float = 30.0, body_id: int = 0) -> None:
-        if not (np.isfinite(fps) and fps > 0):
-            raise OutputError(f"BVH file {path}: fps must be positive, got {fps}")
-        self.body_id = _check_id(body_id, f"BVH file {path}")
-        super().__init__(path, "wb")
-        self.body = body
-        self.rig = body.rig
-        self.order = depth_first(self.rig.parents)
-        self._last: str | None = None
-        try:
-            self._file.write(self._header(fps).encode("ascii"))
-        except OSError as exc:
-            raise _error(self.what, self.path, exc) from exc
-        self._flush()
-
-    def _header(self, fps: float) -> str:
-        parents, heads = self.rig.parents, self.rig.heads * BVH_UNITS_PER_M
-        has_child = np.zeros(len(parents), dtype=bool)
-        has_child[parents[parents >= 0]] = True
-        lines = ["HIERARCHY"]
-        depth = {0: 0}
-        open_bones: list[int] = []
-        for bone in self.order:
-            parent = int(parents[bone])
-            while open_bones and open_bones[-1] != parent:  # close the finished subtrees
-                lines.append("  " * depth[open_bones.pop()] + "}")
-            depth[bone] = 0 if parent < 0 else depth[parent] + 1
-            pad = "  " * depth[bone]
-            name = "_".join(str(self.body.bone_names[bone]).split()) or f"bone{bone}"
-            if parent < 0:
-                lines += [f"ROOT {name}", pad + "{", pad + "  OFFSET " + _numbers((0.0, 0.0, 0.0)),
-                          pad + "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"]
-            else:
-                lines += [f"{pad}JOINT {name}", pad + "{", pad + "  OFFSET " + _numbers(heads[bone] - heads[parent]),
-                          pad + "  CHANNELS 3 Zrotation Xrotation Yrotation"]
-            if not has_child[bone]:
-                lines += [pad + "  End Site", pad + "  {", pad + "    OFFSET " + _numbers(self._end_site(bone)),
-                          pad + "  }"]
-            open_bones.append(bone)
-        while open_bones:
-            lines.append("  " * depth[open_bones.pop()] + "}")
-        lines += ["MOTION", "Frames: "]
-        head = "\n".join(lines)
-        self._count_at = len(head.encode("ascii"))
-        return head + f"{0:<{FRAMES_WIDTH}d}\nFrame Time: {1.0 / fps:.8f}\n"
-
-    def _end_site(self, bone: int) -> np.ndarray:
-        """End Site offset (3,) cm of a leaf bone: half its parent segment along it, 1..10 cm;
-        5 cm down where the segment is degenerate."""
-        parent = int(self.rig.parents[bone])
-        segment = BVH_UNITS_PER_M * (self.rig.heads[bone] - self.rig.heads[max(parent, 0)])
-        length = float(np.linalg.norm(segment))
-        if parent < 0 or length < 1e-6:
-            return np.array([0.0, -5.0, 0.0])
-        return segment / length * float(np.clip(0.5 * length, 1.0, 10.0))
-
-    def channels(self, h: np.ndarray) -> np.ndarray:
-        """Channel values (6 + 3 (B - 1),) of pose ``h`` (36,) in file order: root position (cm,
-        BVH world), then each bone's Z, X, Y rotation (degrees) relative to its parent."""
-        rot, pos = forward_kinematics(self.rig, np.asarray(h, dtype=np.float64)[None])
-        rot, pos = rot[0], pos[0]
-        parents = self.rig.parents
-        local = np.empty_like(rot)
-        local[0] = CAMERA_TO_BVH @ rot[0]
-        local[1:] = np.swapaxes(rot[parents[1:]], -1, -2) @ rot[1:]
-        with warnings.catch_warnings():  # gimbal lock: scipy still returns angles giving the matrix
-            warnings.simplefilter("ignore", UserWarning)
-            euler = Rotation.from_matrix(local[self.order]).as_euler("ZXY", degrees=True)
-        return np.concatenate([BVH_UNITS_PER_M * CAMERA_TO_BVH @ pos[0], euler.ravel()])
-
-    def _row(self, message: dict) -> str:
-        mine = [b for b in message.get("bodies") or [] if b.get("id") == self.body_id]
-        pose = mine[0].get("pose") if mine else None
-        if pose is not None:
-            try:
-                return _numbers(self.channels(np.asarray(pose, dtype=np.float64)))
-            except (ShapeError, ValueError):  # a malformed pose counts as none
-                pass
-        if self._last is None:
-            self._last = _numbers(self.channels(self.body.rest_pose(quaternion=UPRIGHT)))
-        return self._last
-
-    def frame(self, message: dict, frame: Frame | None = None) -> None:
-        """Append one MOTION row for ``message`` and rewrite the ``Frames:`` count."""
-        self._check_open()
-        row = self._row(message)
-        try:
-            self._file.write((row + "\n").encode("ascii"))
-            self._file.seek(self._count_at)
-            self._file.write(f"{self.frames + 1:<{FRAMES_WIDTH}d}".encode("ascii"))
-            self._file.seek(0, 2)
-        except OSError as exc:
-            raise _error(self.what, self.path, exc) from exc
-        self._flush()
-        self._last = row
-        self.frames += 1
-
-
-class PerIdBvhSink:
-    """One :class:`BvhSink` per body id in folder ``out_dir``, all animating ``body`` at ``fps``.
-
-    Id 0's file, ``poses.bvh``, is created at once and has a row for every frame message (as
-    a run of one person always had); id N's, ``poses_id<N>.bvh``, is created by the first
-    message that holds a body with id N and has a row for that message and every later one.
-    Each file repeats its last row on frames where its id is absent or has no pose, and is a
-    complete BVH after every frame. Every id seen keeps its file open and gets a row per
-    frame until :meth:`close`. A body whose id is not an integer >= 0 raises
-    :class:`~swarmpose.core.errors.OutputError`, as does a file that cannot be written.
-    """
-
-    what = "the BVH files"
-
-    def __init__(self, out_dir: str | Path, body: SkinnedBody, fps: float = 30.0) -> None:
-        self.out_dir = Path(out_dir)
-        self.body = body
-        self.fps = fps
-        self.frames = 0
-        self._closed = False
-        self.sinks: dict[int, BvhSink] = {0: BvhSink(bvh_path(self.out_dir, 0), body, fps, body_id=0)}
-
-    @property
-    def path(self) -> Path:
-        """``poses.bvh``, the file of id 0."""
-        return self.sinks[0].path
-
-    @property
-    def paths(self) -> list[Path]:
-        """Every BVH file created so far, by id."""
-        return [self.sinks[k].path for k in sorted(self.sinks)]
-
-    def frame(self, message: dict, frame: Frame | None = None) -> None:
-        """Open the files of ids first seen in ``message``, then append one row to every file."""
-        if self._closed:
-            raise OutputError(f"{self.what} in {self.out_dir} are closed; open a new sink to write more frames")
-        for body in message.get("bodies") or []:
-            body_id = _check_id(body.get("id"), f"frame {message.get('frame', '?')}")
-            if body_id not in self.sinks:
-                self.sinks[body_id] = BvhSink(bvh_path(self.out_dir, body_id), self.body, self.fps, body_id)
-        for sink in self.sinks.values():
-            sink.frame(message, frame)
-        self.frames += 1
-
-    def status(self, message: dict) -> None:
-        """Status messages are not recorded."""
-
-    def close(self) -> None:
-        """Close every file (idempotent); the first error, if any, is raised after all are closed."""
-        if self._closed:
-            return
-        self._closed = True
-        error: OutputError | None = None
-        for sink in self.sinks.values():
-            try:
-                sink.close()
-            except OutputError as exc:
-                error = error or exc
-        if error is not None:
-            raise error
 
 
 def open_recording(out_dir: str | Path, body: SkinnedBody, fps: float = 30.0, overlay: bool = True) -> list[Sink]:
@@ -400,3 +147,7 @@ def open_recording(out_dir: str | Path, body: SkinnedBody, fps: float = 30.0, ov
             sink.close()
         raise
     return sinks
+
+
+__all__ = ["BVH_UNITS_PER_M", "CAMERA_TO_BVH", "CSV_COLUMNS", "UPRIGHT", "BvhSink", "CsvSink", "JsonlSink",
+           "PerIdBvhSink", "bvh_path", "bvh_transform", "csv_rows", "open_recording"]

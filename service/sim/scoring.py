@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarmpose.body.skeleton import EVAL_JOINTS
+from swarmpose.core.world import transform_points
 from swarmpose.sim.evaluate import summarise_frames
 from swarmpose.sim.people_metrics import TruePerson, score_people
 from swarmpose.sources.base import Frame
@@ -43,9 +44,16 @@ class ScoreSink:
             self.ground_truth.row(index)
         except KeyError:  # a frame the sequence has no ground truth for
             return
-        self.bodies[index] = {int(b.get("id", k)): body_joints(b) for k, b in enumerate(message["bodies"])
+        back = None  # ground truth is in the camera frame: world coordinates go back there
+        if message.get("coordinates") == "world" and message.get("camera_to_world") is not None:
+            back = np.linalg.inv(np.asarray(message["camera_to_world"], dtype=np.float64))
+
+        def joints_of(body: dict) -> np.ndarray:
+            return body_joints(body) if back is None else transform_points(back, body_joints(body))
+
+        self.bodies[index] = {int(b.get("id", k)): joints_of(b) for k, b in enumerate(message["bodies"])
                               if b.get("state") != "lost"}
-        lost = [body_joints(b) for b in message["bodies"] if b.get("state") == "lost"]
+        lost = [joints_of(b) for b in message["bodies"] if b.get("state") == "lost"]
         self._lost[index] = lost[0] if lost else None
 
     def estimates(self) -> dict[int, np.ndarray]:

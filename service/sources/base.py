@@ -10,8 +10,10 @@ Failure policy (every source): a source that cannot be opened raises
 :class:`~swarmpose.core.errors.SourceError` (or ``ConfigError`` for a malformed URI) from its
 constructor, and so does a failure before the first frame. Once a frame has been delivered,
 a failure never raises into the caller: a single unreadable frame is yielded as a
-:class:`SkippedFrame` and iteration goes on; a failure of the whole source (file truncated,
-device gone, reads timing out) ends the iteration with ``status`` set to ``"error: …"``.
+:class:`SkippedFrame` (logged as a warning naming its reason, the first
+:data:`SKIP_WARNINGS` of a pass) and iteration goes on; a failure of the whole source (file truncated,
+device gone, reads timing out) ends the iteration with ``status`` set to ``"error: …"``, and
+so does a pass that yielded only skipped frames (nothing in the source could be read).
 Live devices first try to reconnect, at most :data:`MAX_RECONNECTS` times, yielding a
 :class:`SkippedFrame` for each failed read. :meth:`FrameSource.__iter__` enforces this for
 every subclass.
@@ -19,6 +21,7 @@ every subclass.
 
 from __future__ import annotations
 
+import logging
 import re
 import time
 from collections.abc import Callable, Iterator
@@ -33,6 +36,9 @@ MAX_RECONNECTS = 3
 """How often a live source tries to reopen its device after a failed read before it gives up."""
 CAPTURE_RETRIES = 10
 """Consecutive empty captures (no frame ready yet) of a live source that count as one failed read."""
+SKIP_WARNINGS = 10
+"""Skipped frames of one pass over a source that are logged one by one (with the file or failure)."""
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -87,10 +93,14 @@ class FrameSource:
 
     def __iter__(self) -> Iterator[Frame | SkippedFrame]:
         """The frames of :meth:`_frames` under the failure policy of this module's docstring."""
-        delivered = False
+        delivered, skipped, first_skip = False, 0, None
         try:
             for item in self._frames():
                 delivered = delivered or isinstance(item, Frame)
+                if isinstance(item, SkippedFrame):
+                    skipped += 1
+                    first_skip = first_skip or item
+                    warn_skipped(self.uri or type(self).__name__, item, skipped)
                 yield item
         except Exception as exc:  # the policy: nothing escapes after the first frame
             message = exc_message(exc)
@@ -101,6 +111,9 @@ class FrameSource:
                 raise SourceError(f"{self.uri or type(self).__name__}: {message}") from exc
             self.status = f"error: {message}"
             return
+        if first_skip is not None and not delivered:  # it ran, but nothing in it could be read
+            self.status = (f"error: none of its {skipped} frames could be read (frame {first_skip.index}: "
+                           f"{first_skip.reason})")
         if not self.status.startswith("error"):
             self.status = "ended"
 
@@ -112,6 +125,16 @@ class FrameSource:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def warn_skipped(name: str, item: SkippedFrame, count: int) -> None:
+    """Log the ``count``-th skipped frame of source ``name`` as a warning naming its reason; after
+    :data:`SKIP_WARNINGS` of them, once, that further ones are only counted."""
+    if count <= SKIP_WARNINGS:
+        log.warning("%s: frame %d skipped: %s", name, item.index, item.reason)
+    elif count == SKIP_WARNINGS + 1:
+        log.warning("%s: more frames skipped; the run's summary and status messages count them, "
+                    "the frames' messages say why", name)
 
 
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")

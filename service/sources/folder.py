@@ -18,9 +18,10 @@ A missing file (a colour image without depth or the reverse, a gap in the number
 ``sequence.json``'s ``frames``), an undecodable PNG, or a later frame whose depth and colour
 differ in size is yielded as a :class:`~swarmpose.sources.base.SkippedFrame` whose reason
 names the file, and iteration goes on. Depth and colour of different sizes in the *first*
-complete frame, or images of another size than the intrinsics, raise
+complete frame, images of another size than the intrinsics, or a first depth image that
+decodes but is not single-channel 16-bit (an 8-bit or colour export) raise
 :class:`~swarmpose.core.errors.SourceError` when the folder is opened: that is a folder of
-unregistered images, not a damaged frame.
+unregistered images or of pictures of the depth, not a damaged frame.
 """
 
 from __future__ import annotations
@@ -64,7 +65,8 @@ class FolderSource(FrameSource):
     Attributes: ``folder`` (Path), ``layout`` ("sequence" or "tum"), ``length`` (frame slots,
     skipped ones included), ``fps`` (Hz: ``sequence.json``'s, or TUM's median depth rate),
     ``intrinsics``, ``ground_truth`` (:class:`~swarmpose.sources.groundtruth.GroundTruth` from
-    ``groundtruth.jsonl``, None if absent).
+    ``groundtruth.jsonl``, None if absent), ``recorded_body`` (the name of the body
+    ``swarmpose synth`` rendered, from ``sequence.json``; "" when not recorded).
     """
 
     def __init__(self, folder: Path | str, uri: str | None = None):
@@ -75,6 +77,7 @@ class FolderSource(FrameSource):
                               "`swarmpose synth`, an Open3D color/+depth/ folder or a TUM RGB-D folder")
         if (self.folder / "rgb.txt").is_file() and (self.folder / "depth.txt").is_file():
             self.layout = "tum"
+            self.recorded_body = ""
             self._entries, self.fps = self._tum_entries()
             self._units = TUM_UNITS_PER_METRE
         else:
@@ -97,6 +100,7 @@ class FolderSource(FrameSource):
             raise SourceError(f"folder {self.folder} has no color/ and depth/ subfolders and no TUM rgb.txt + "
                               "depth.txt; it is not an RGBD sequence (write one with `swarmpose synth`)")
         meta = self._sequence_json()
+        self.recorded_body = str(meta.get("body") or "")
         fps = float(meta.get("fps", DEFAULT_FPS))
         if not fps > 0:
             raise SourceError(f"{self.folder / 'sequence.json'}: fps must be positive, got {fps}")
@@ -104,6 +108,9 @@ class FolderSource(FrameSource):
         colors = {p.stem: p for p in sorted(color_dir.iterdir()) if p.suffix.lower() in COLOR_SUFFIXES}
         depths = {p.stem: p for p in sorted(depth_dir.iterdir()) if p.suffix.lower() == ".png"}
         stems = set(colors) | set(depths)
+        if not stems:
+            raise SourceError(f"folder {self.folder}: {color_dir.name}/ and depth/ hold no images (.png, .jpg); "
+                              "write a sequence with `swarmpose synth` or copy the recording's images there")
         if all(s.isdigit() for s in stems):
             number = {s: int(s) for s in stems}
             width = max((len(s) for s in stems), default=6)
@@ -217,6 +224,11 @@ class FolderSource(FrameSource):
         if dsize != isize:
             raise SourceError(f"{self.folder}: images are {dsize[0]}x{dsize[1]} but the intrinsics are for "
                               f"{isize[0]}x{isize[1]}; fix intrinsic.json")
+        try:
+            read_depth(first.depth, self._units)
+        except SourceError as exc:  # it decodes (it has a size), so it is not a depth image
+            raise SourceError(f"{self.folder}: the depth images are not depth: {exc}; convert them to 16-bit PNGs "
+                              f"of {self._units:g} units per metre") from exc
 
     # -- frames ------------------------------------------------------------------------------
 

@@ -105,8 +105,12 @@ def load_intrinsics(path: Path) -> tuple[Intrinsics, float | None]:
     except (KeyError, ValueError, TypeError) as exc:
         raise SourceError(f"intrinsics file {path} lacks {exc}: expected Open3D's PinholeCameraIntrinsic "
                           "JSON or {width, height, fx, fy, cx, cy}") from exc
-    if intr.width <= 0 or intr.height <= 0 or intr.fx <= 0 or intr.fy <= 0:
-        raise SourceError(f"intrinsics file {path}: size and focal lengths must be positive, got {intr}")
+    if intr.width <= 0 or intr.height <= 0 or not (intr.fx > 0 and intr.fy > 0):
+        raise SourceError(f"intrinsics file {path}: size and focal lengths must be positive, got {intr.width}x"
+                          f"{intr.height} px, fx {intr.fx:g}, fy {intr.fy:g}; give the camera's calibration")
+    if not all(np.isfinite((intr.fx, intr.fy, intr.cx, intr.cy))):
+        raise SourceError(f"intrinsics file {path}: fx, fy, cx and cy must be finite numbers, got fx {intr.fx:g}, "
+                          f"fy {intr.fy:g}, cx {intr.cx:g}, cy {intr.cy:g}; give the camera's calibration")
     scale = data.get("depth_scale")
     units = None
     if isinstance(scale, (int, float)) and scale > 0:

@@ -29,7 +29,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from swarmpose.body.skeleton import EVAL_JOINTS, ROOT_QUATERNION
+from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import TrackingError
@@ -43,6 +43,7 @@ from swarmpose.tracking.config import MODE_WEIGHTS, TrackerConfig
 from swarmpose.tracking.init_pose import FACINGS_DEG, torso_pose, turned
 from swarmpose.tracking.lift import lift_eval_joints
 from swarmpose.tracking.objective import JointTargets, Objective
+from swarmpose.tracking.one_euro import PoseFilter
 from swarmpose.tracking.pso import PsoResult, minimise
 from swarmpose.tracking.result import BodyResult, lost_body
 
@@ -87,6 +88,9 @@ class BodyTracker:
             self.objective = Objective(self.body, intrinsics, scorer, self.weights, self._coarse_scorer(context))
         self.history: list[np.ndarray] = []
         self.previous: np.ndarray | None = None
+        self.filter = (PoseFilter(config.smoothing_cutoff_hz, config.smoothing_beta)
+                       if config.smoothing == "one-euro" else None)
+        """The published poses' filter (``--smoothing one-euro``); the search never sees its output."""
         self.lo, self.hi = search.pose_bounds()
 
     @property
@@ -126,6 +130,8 @@ class BodyTracker:
         """Forget the track: the next frame initialises from its detection."""
         self.history.clear()
         self.previous = None
+        if self.filter is not None:
+            self.filter.reset()
 
     def search_box(self, reference: np.ndarray | None, targets: JointTargets) -> tuple[float, float, float, float]:
         """The box B (u0, v0, width, height) px the depth term looks in: around the silhouette of
@@ -196,8 +202,6 @@ class BodyTracker:
         best = result.best
         self.objective(best[None])
         parts = {k: float(v[0]) for k, v in self.objective.last_parts.items()}
-        if self.config.smoothing > 0 and self.previous is not None and state == "tracking":
-            best = self._smooth(best)
         tile, counts = self._render(best)
         out_state, reason = verdict.judge(self.objective, counts, targets, parts, state,
                                           self.config.lost_joint_error, self.config.lost_depth_agreement,
@@ -212,7 +216,18 @@ class BodyTracker:
         joints2d = self.intrinsics.project(joints3d)
         conf = verdict.confidence(self.objective, tile, joints2d, joints, targets, self.config.min_score)
         timings["total"] = 1000 * (time.perf_counter() - t0)
-        return BodyResult(self.body_id, out_state, reason, best, joints3d, joints2d, conf, parts, timings, joints)
+        result = BodyResult(self.body_id, out_state, reason, best, joints3d, joints2d, conf, parts, timings, joints)
+        if self.filter is None or out_state == "lost":
+            return result
+        return self._filtered(result, frame.timestamp_ns * 1e-9)
+
+    def _filtered(self, result: BodyResult, time_s: float) -> BodyResult:
+        """``result`` with its pose through :attr:`filter` and the joints of that pose; the search's own
+        result stays in ``unfiltered`` (the next frame's start, the detector's box, association)."""
+        pose = self.filter(result.pose, time_s)
+        joints3d = self.body.posed_points(pose[None], EVAL_JOINTS)[0]
+        return replace(result, pose=pose, joints3d=joints3d, joints2d=self.intrinsics.project(joints3d),
+                       unfiltered=result)
 
     def _lift(self, depth: np.ndarray, joints: Joints2D | None, t0: float) -> BodyResult:
         j3 = lift_eval_joints(depth, self.intrinsics, joints, self.config.min_score)
@@ -305,12 +320,6 @@ class BodyTracker:
                             refine_at=refine_at, refine=objective.use_full_resolution)
         finally:
             objective.coarse_active = False
-
-    def _smooth(self, best: np.ndarray) -> np.ndarray:
-        a = self.config.smoothing
-        out = (1 - a) * best + a * self.previous
-        out[ROOT_QUATERNION] /= np.linalg.norm(out[ROOT_QUATERNION])
-        return out
 
     def _render(self, best: np.ndarray) -> tuple[np.ndarray | None, dict[str, np.ndarray] | None]:
         """The best pose's depth tile (TH, TW) m and its counts, once per frame; (None, None)

@@ -11,6 +11,7 @@ from swarmpose.tracking.objective import ObjectiveWeights
 from swarmpose.tracking.pso import VARIANTS, PsoConfig
 
 MODES = ("hybrid", "depth", "joints", "lift")
+SMOOTHING = ("off", "one-euro")
 MODE_WEIGHTS = {"hybrid": (3.0, 1.0), "depth": (1.0, 0.0), "joints": (0.0, 1.0)}
 """(w_D, w_J) of each mode; ``lift`` fits no model."""
 
@@ -51,8 +52,13 @@ class TrackerConfig:
                                       "(detectors swap sides on people seen from behind)")
     penetration: float = setting(1.0, "w_P: cost per cm of an elbow or wrist inside the torso (0 = off)",
                                  minimum=0.0)
-    smoothing: float = setting(0.0, "blend each pose with the previous one, 0..1 (0 = off, as in evaluation)",
-                               minimum=0.0, maximum=0.99)
+    smoothing: str = setting("off", "smooth the published poses: off (as in evaluation) or one-euro (a One-Euro "
+                                    "filter; the search itself always starts from the unfiltered pose)",
+                             choices=SMOOTHING)
+    smoothing_cutoff_hz: float = setting(4.0, "One-Euro: the cut-off at rest, Hz (lower: steadier, more lag)",
+                                         minimum=0.01)
+    smoothing_beta: float = setting(10.0, "One-Euro: how fast the cut-off rises with speed, s per m or rad (higher: "
+                                         "less lag in fast motion)", minimum=0.0)
     device: str = setting("", "OpenCL device: cpu, gpu, PLATFORM:DEVICE or part of its name (empty: a GPU, "
                               "else PoCL)", aliases=("cl_device",))
     alpha: float = setting(0.97, "share of the 2D term in E_J (the rest is the 3D term)", minimum=0.0, maximum=1.0)

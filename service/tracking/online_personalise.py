@@ -53,8 +53,9 @@ class PersonalisingTracker(BodyTracker):
 
     def step(self, frame: Frame, joints: Joints2D | None, others_removed: bool = False) -> BodyResult:
         result = super().step(frame, joints, others_removed)
-        if self.state == "collecting" and result.state != "lost" and result.pose is not None:
-            self.samples.append(ShapeSample(replace(frame, color=None), joints, result.pose))
+        found = result.found
+        if self.state == "collecting" and found.state != "lost" and found.pose is not None:
+            self.samples.append(ShapeSample(replace(frame, color=None), joints, found.pose))
             if len(self.samples) >= self.needed:
                 self._personalise()
         return result

@@ -229,7 +229,8 @@ class PeopleTracker:
         """The mean (3,) m of the fit's finite joints; ``otherwise`` without any."""
         if body is None:
             return otherwise
-        joints = body.joints3d[np.all(np.isfinite(body.joints3d), axis=1)]
+        joints3d = body.found.joints3d
+        joints = joints3d[np.all(np.isfinite(joints3d), axis=1)]
         return joints.mean(axis=0) if len(joints) else otherwise
 
     def _observed_centre(self, centre: np.ndarray, body: BodyResult | None) -> np.ndarray:

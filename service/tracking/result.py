@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from swarmpose.body.skeleton import EVAL_JOINTS
+from swarmpose.core.world import WorldState, transform_points, transform_poses
 from swarmpose.detect.joints import Joints2D
 from swarmpose.messages.build import body_message, frame_message
 
@@ -37,7 +38,8 @@ class BodyResult:
     normally); pose: (36,) or None; joints3d: (14, 3) m, camera frame, in ``EVAL_JOINTS``
     order (NaN where unknown); joints2d: (14, 2) px; confidence: (14,) 0..1; objective: E
     and its terms of the chosen pose; timings_ms: where this body's time went; detection:
-    the 2D joints it was fitted to (None: none).
+    the 2D joints it was fitted to (None: none); unfiltered: with ``--smoothing``, the result
+    as the search found it, before the published pose was filtered (None: not filtered).
     """
 
     id: int
@@ -50,6 +52,13 @@ class BodyResult:
     objective: Mapping[str, float] = field(default_factory=dict)
     timings_ms: Mapping[str, float] = field(default_factory=dict)
     detection: Joints2D | None = None
+    unfiltered: BodyResult | None = None
+
+    @property
+    def found(self) -> BodyResult:
+        """The result as the search found it (itself unless the published pose is filtered): what the
+        tracking's own feedback (the detector's next box, association, personalisation) uses."""
+        return self if self.unfiltered is None else self.unfiltered
 
     @property
     def joints(self) -> dict[str, Joint]:
@@ -62,18 +71,24 @@ class BodyResult:
 
     def joints_box(self) -> np.ndarray | None:
         """(4,) [u0, v0, u1, v1] px around the finite 2D joints (where to detect next), or None."""
-        ok = np.all(np.isfinite(self.joints2d), axis=1)
+        joints2d = self.found.joints2d
+        ok = np.all(np.isfinite(joints2d), axis=1)
         if not ok.any():
             return None
-        pts = self.joints2d[ok]
+        pts = joints2d[ok]
         return np.concatenate([pts.min(axis=0), pts.max(axis=0)])
 
-    def to_message(self) -> dict:
-        """This body as one entry of a frame message's ``bodies``."""
+    def to_message(self, camera_to_world: np.ndarray | None = None) -> dict:
+        """This body as one entry of a frame message's ``bodies``; with ``camera_to_world`` (4, 4),
+        its joints and pose in that world frame (pixels stay pixels)."""
         detection = None
         if self.detection is not None:
             detection = {"layout": self.detection.layout.name, "keypoints": self.detection.as_dict()}
-        return body_message(self.id, self.state, self.reason, self.pose, self.joints3d, self.joints2d,
+        joints3d, pose = self.joints3d, self.pose
+        if camera_to_world is not None:
+            joints3d = transform_points(camera_to_world, joints3d)
+            pose = None if pose is None else transform_poses(camera_to_world, pose)
+        return body_message(self.id, self.state, self.reason, pose, joints3d, self.joints2d,
                             self.confidence, self.objective, detection)
 
 
@@ -95,7 +110,10 @@ class FrameResult:
     tracking time; skipped: the source could not deliver the frame; received_ns: wall-clock
     time (ns) the frame was taken from the source (latency counts from there); people: with
     several people, the counts a status reports (``tracked``, ``found``, ``created``,
-    ``retired``, ``beyond_max_people``, ``no_person``), None in single-person mode.
+    ``retired``, ``beyond_max_people``, ``no_person``), None in single-person mode; world: the
+    camera's floor and camera-to-world transform as known at this frame (None: no floor, or
+    none asked for); coordinates: the frame wanted in the message, ``camera`` or ``world``
+    (world takes effect once ``world.camera_to_world`` is known).
     """
 
     index: int
@@ -106,6 +124,8 @@ class FrameResult:
     skipped: bool = False
     received_ns: int = 0
     people: Mapping[str, int] | None = None
+    world: WorldState | None = None
+    coordinates: str = "camera"
 
     @property
     def state(self) -> str:
@@ -120,5 +140,9 @@ class FrameResult:
         publish_ns: now unless given; received_ns: this result's (or publish time when unknown)."""
         publish = time.time_ns() if publish_ns is None else int(publish_ns)
         received = received_ns if received_ns is not None else (self.received_ns or publish)
-        return frame_message(camera, self.index, self.timestamp_ns, received, publish,
-                             [b.to_message() for b in self.bodies], reason=self.reason, timings_ms=self.timings_ms)
+        transform = None if self.world is None else self.world.camera_to_world
+        in_world = self.coordinates == "world" and transform is not None
+        bodies = [b.to_message(transform if in_world else None) for b in self.bodies]
+        return frame_message(camera, self.index, self.timestamp_ns, received, publish, bodies, reason=self.reason,
+                             timings_ms=self.timings_ms, coordinates="world" if in_world else "camera",
+                             camera_to_world=transform)

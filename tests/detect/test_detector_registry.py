@@ -115,9 +115,74 @@ def test_openpose_json_spec(tmp_path):
     assert make_detector(f"openpose-json:{tmp_path}?layout=openpose18").layout.name == "openpose18"
 
 
-@pytest.mark.parametrize("spec", ["openpose", "movenet", "onnx", "simulated:3", ""])
+@pytest.mark.parametrize("spec", ["openpose", "movenet2", "onnx", "simulated:3", ""])
 def test_unknown_specs_list_the_forms(spec):
     with pytest.raises(ConfigError) as err:
         make_detector(spec)
     text = str(err.value)
     assert "simulated" in text and "onnx:MODEL" in text and "openpose-json:DIR" in text
+
+
+def _still_source():
+    """The real Kinect frame of five people as ``rgbd:`` opens it."""
+    from swarmpose.sources.registry import open_source
+
+    folder = ASSETS / "rgbd" / "kinect_five_people"
+    return open_source(f"rgbd:{folder}/five_people_color.png,{folder}/five_people_depth_mm.png,"
+                       f"{folder}/five_people_intrinsics.json")
+
+
+@needs_assets
+@pytest.mark.parametrize("name", ["movenet", "blazepose"])
+def test_networks_by_name_come_from_the_models_folder_and_equal_the_onnx_form(name, tmp_path, monkeypatch):
+    """``--detector NAME`` loads NAME's file from $SWARMPOSE_MODELS (here a folder holding a link to the
+    asset) and detects exactly what ``onnx:PATH`` does on a real frame."""
+    path = MOVENET if name == "movenet" else BLAZEPOSE
+    (tmp_path / path.name).symlink_to(path)
+    monkeypatch.setenv("SWARMPOSE_MODELS", str(tmp_path))
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "no-data"))
+    still = _still_source()
+    frame = next(iter(still))
+    still.close()
+    by_name = make_detector(f"{name}?threads=1")
+    by_path = make_detector(f"onnx:{path}?threads=1")
+    try:
+        assert by_name.path == tmp_path / path.name
+        np.testing.assert_array_equal(by_name.detect(frame).keypoints, by_path.detect(frame).keypoints)
+    finally:
+        by_name.close()
+        by_path.close()
+
+
+def test_a_network_not_in_any_models_folder_names_the_folders_and_the_fix(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    monkeypatch.setenv("SWARMPOSE_ASSETS", str(tmp_path / "assets"))
+    monkeypatch.delenv("SWARMPOSE_MODELS", raising=False)
+    with pytest.raises(ConfigError) as err:
+        make_detector("movenet", models=str(tmp_path))
+    text = str(err.value)
+    assert "movenet_singlepose_lightning.onnx" in text and str(tmp_path) in text
+    assert str(tmp_path / "data" / "swarmpose" / "models") in text and "--models" in text and "onnx:PATH" in text
+    with pytest.raises(ConfigError, match="no such folder"):
+        make_detector("blazepose", models=str(tmp_path / "missing"))
+
+
+def test_auto_replays_recorded_detections_and_otherwise_runs_a_network(sequence, tmp_path, monkeypatch):
+    """auto: the synth sequence's recorded detections; a source without them (a still frame) gets MoveNet,
+    or, where MoveNet is in no models folder, an error that says so rather than the simulated detector."""
+    assert make_detector("auto", _sequence_source(sequence)).name == "simulated"
+    if not ASSETS.is_dir():
+        pytest.skip(f"shared assets absent ({ASSETS}): the real Kinect frame is needed")
+    still = _still_source()
+    try:
+        monkeypatch.setenv("SWARMPOSE_MODELS", str(ASSETS / "pose2d"))
+        detector = make_detector("auto", still)
+        assert detector.path.name == MOVENET.name
+        detector.close()
+        monkeypatch.setenv("SWARMPOSE_MODELS", str(tmp_path))
+        monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path))
+        monkeypatch.setenv("SWARMPOSE_ASSETS", str(tmp_path))
+        with pytest.raises(ConfigError, match="--detector movenet"):
+            make_detector("auto", still)
+    finally:
+        still.close()

@@ -1,4 +1,4 @@
-"""docker/: the daemon's Dockerfile and compose.yaml, checked without Docker (which cannot run here).
+"""docker/: the daemon's Dockerfile and compose.yaml, checked statically (test_container.py builds and runs it).
 
 hadolint lints the Dockerfile (and must reject a bad one, so the lint is known to be live); the
 variables both files set must be settings the program knows, with values its configuration
@@ -37,9 +37,9 @@ README = DOCKER / "README.md"
 
 SETTING_VARIABLES = environment_names(ServiceConfig)   # every SWARMPOSE_* variable -> its setting, older names too
 KNOWN_VARIABLES = set(SETTING_VARIABLES) | {ENV_CONFIG, "SWARMPOSE_ASSETS"}
-# Variables for Python and pip in the image, not for swarmpose.
+# Variables for Python, pip and the venv in the image, not for swarmpose.
 OTHER_VARIABLES = {"PYTHONDONTWRITEBYTECODE", "PYTHONUNBUFFERED", "PIP_DISABLE_PIP_VERSION_CHECK",
-                   "PIP_ROOT_USER_ACTION"}
+                   "PIP_ROOT_USER_ACTION", "VIRTUAL_ENV", "PATH"}
 SERVICES = {"zenoh", "swarmpose", "subscriber"}
 
 
@@ -170,11 +170,19 @@ def test_dockerfile_environment_names_known_settings_with_valid_values():
 
 
 def test_dockerfile_base_user_healthcheck_entrypoint():
-    base = arguments("FROM")
-    assert len(base) == 1
-    image = base[0].split()[0]
+    stages = [args.split() for args in arguments("FROM")]
+    image = stages[0][0]
     name, _, tag = image.partition(":")
-    assert name == "python" and "slim" in tag and "latest" not in tag and re.match(r"3\.\d+\.\d+-", tag), image
+    assert name == "debian" and tag == "bookworm-slim", f"{image}: Debian's slim image, which build-image.sh can make"
+    # the other stages start from an earlier one (`FROM system AS requirements`), never another image
+    names = [words[2] for words in stages if len(words) == 3 and words[1].upper() == "AS"]
+    for index, words in enumerate(stages[1:], start=1):
+        assert words[0] in names[:index], f"FROM {' '.join(words)}: not an earlier stage"
+
+    # Debian's Python, with the package in a venv that comes first on PATH (so `swarmpose` and `python` are its)
+    env = image_environment()
+    assert env["PATH"].split(":")[0] == env["VIRTUAL_ENV"] + "/bin"
+    assert any('python3 -m venv "$VIRTUAL_ENV"' in args for args in arguments("RUN"))
 
     users = arguments("USER")
     assert users, "the Dockerfile sets no USER: the daemon would run as root"
@@ -194,9 +202,13 @@ def test_dockerfile_base_user_healthcheck_entrypoint():
 
 def test_dockerfile_copies_what_setuptools_needs_and_it_exists():
     sources = []
+    stages = {args.split()[-1] for args in arguments("FROM") if " AS " in args.upper()}
     for args in arguments("COPY"):
         tokens = shlex.split(args)
-        assert not any(t.startswith("--from") for t in tokens), "no multi-stage copies expected"
+        origin = [t.split("=", 1)[1] for t in tokens if t.startswith("--from=")]
+        if origin:  # from an earlier stage of the build, not from the repository
+            assert origin[0] in stages, f"COPY {args}: no stage {origin[0]}"
+            continue
         sources += [t for t in tokens if not t.startswith("--")][:-1]
     for source in sources:
         assert (REPO / source).exists(), f"Dockerfile: COPY {source}: no such path in the repository"
@@ -281,6 +293,7 @@ def test_compose_subscriber_runs_the_example_against_the_router():
     subscriber = services["subscriber"]
     assert subscriber["image"] == services["swarmpose"]["image"]
     assert subscriber.get("healthcheck", {}).get("disable") is True, "the daemon's healthcheck does not apply"
+    assert subscriber.get("stop_signal") == "SIGINT", "the subscriber, PID 1 without a SIGTERM handler, ends on SIGINT"
     entrypoint = subscriber["entrypoint"]
     if isinstance(entrypoint, str):
         entrypoint = shlex.split(entrypoint)

@@ -17,6 +17,7 @@ from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import EVAL_JOINTS, EVAL_LINKS, neutral_pose
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError, ProtocolError
+from swarmpose.core.world import WorldState
 from swarmpose.messages import (
     POSE_NAMES,
     check_camera_id,
@@ -121,3 +122,30 @@ def test_the_committed_examples_are_valid():
         example = json.loads((REPO / "protocol" / "examples" / f"{name}.json").read_text())
         validate(example)
         jsonschema.validate(example, json.loads((REPO / "protocol" / f"{name}.schema.json").read_text()))
+
+
+def test_frame_messages_say_their_coordinates_and_carry_the_world_transform():
+    from swarmpose.core.world import normal_of_angles, transform_points, world_from_floor
+    from swarmpose.tracking.result import FrameResult
+
+    body = a_result()
+    t = world_from_floor(normal_of_angles(10.0), 1.2, body.pose[0:3])
+    state = WorldState(t[1, :3], float(t[1, 3]), "depth", 900, t)
+    camera = validate(FrameResult(3, 0, (body,), world=state).to_message("cam0"))
+    world = validate(FrameResult(3, 0, (body,), world=state, coordinates="world").to_message("cam0"))
+    assert camera["coordinates"] == "camera" and world["coordinates"] == "world"
+    assert camera["camera_to_world"] == world["camera_to_world"] == pytest.approx(t, abs=1e-6)
+    head_cam, head_world = (m["bodies"][0]["joints"]["head"]["position_m"] for m in (camera, world))
+    assert head_world == pytest.approx(transform_points(t, head_cam), abs=1e-5)
+    assert world["bodies"][0]["joints"]["left_wrist"]["position_m"] is None  # unknown stays null
+    # world asked for but not known yet: camera coordinates, no transform
+    early = validate(FrameResult(3, 0, (body,), coordinates="world").to_message("cam0"))
+    assert early["coordinates"] == "camera" and early["camera_to_world"] is None
+    for broken in ({**world, "coordinates": "floor"}, {**world, "camera_to_world": [[1, 0, 0, 0]] * 3}):
+        with pytest.raises(ProtocolError, match="invalid at (coordinates|camera_to_world)"):
+            validate(broken)
+    info = validate(info_message("cam0", world={"coordinates": "world", **state.as_dict()}))
+    assert info["world"]["floor"]["camera_height_m"] == pytest.approx(1.2)
+    assert info["world"]["floor"]["pitch_deg"] == pytest.approx(10.0)
+    assert info["skeleton"]["frame"].startswith("world")
+    assert validate(info_message("cam0"))["world"] == {"coordinates": "camera", "floor": None, "camera_to_world": None}

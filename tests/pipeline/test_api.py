@@ -126,14 +126,14 @@ def test_settings_by_name_are_converted_and_checked_as_flags_are(wave_sequence):
     with pytest.raises(ConfigError, match="tile must be WxH pixels"):
         swarmpose.TrackerConfig(tile=(64.5, 64))
     source = swarmpose.open_source(f"folder:{wave_sequence}")
-    with swarmpose.Tracker(source=source, particles="32", tile="32x48", smoothing="0.5") as tracker:
-        assert (tracker.config.particles, tracker.config.tile, tracker.config.smoothing) == (32, (32, 48), 0.5)
+    with swarmpose.Tracker(source=source, particles="32", tile="32x48", smoothing="one-euro") as tracker:
+        assert (tracker.config.particles, tracker.config.tile, tracker.config.smoothing) == (32, (32, 48), "one-euro")
     source.close()
 
 
 def test_the_simulated_detector_without_a_source_says_what_to_pass():
     with pytest.raises(ConfigError, match=r"simulated detector .*swarmpose synth.* source=.*detector='onnx:movenet"):
-        swarmpose.Tracker()
+        swarmpose.Tracker(detector="simulated")
 
 
 class CountingSource(FrameSource):

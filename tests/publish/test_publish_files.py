@@ -85,7 +85,8 @@ def test_jsonl_lines_are_the_messages_and_on_disk_at_once(tmp_path):
 # ---------------------------------------------------------------------------- CSV
 def expected_header() -> list[str]:
     joints = [f"{j}_{f}" for j in EVAL_JOINTS for f in ("x", "y", "z", "u", "v", "confidence")]
-    return ["frame", "capture_ns", "received_ns", "publish_ns", "latency_ms", "body_id", "state", "reason",
+    return ["frame", "capture_ns", "received_ns", "publish_ns", "latency_ms", "coordinates", "body_id", "state",
+            "reason",
             *joints, *POSE_NAMES, "objective"]
 
 
@@ -110,13 +111,13 @@ def test_csv_rows_hold_the_message_values(tmp_path):
         assert reader.fieldnames == expected_header()
         rows = list(reader)
     assert [int(r["frame"]) for r in rows] == [0, 1, 2, 2]  # one row per frame and body
-    assert len(expected_header()) == 8 + 14 * 6 + 36 + 1
+    assert len(expected_header()) == 9 + 14 * 6 + 36 + 1
 
     # frame 1: no body -> one row, empty body cells, the frame's reason
     empty = rows[1]
     assert empty["reason"] == messages[1]["reason"]
     assert empty["body_id"] == empty["state"] == empty["objective"] == ""
-    assert all(empty[c] == "" for c in expected_header()[8:])
+    assert all(empty[c] == "" for c in expected_header()[9:])
     assert int(empty["publish_ns"]) == messages[1]["publish_ns"]
 
     for row, (msg, body) in zip([rows[0], rows[2], rows[3]],
@@ -125,6 +126,7 @@ def test_csv_rows_hold_the_message_values(tmp_path):
         for key in ("frame", "capture_ns", "received_ns", "publish_ns"):
             assert int(row[key]) == msg[key]
         assert float(row["latency_ms"]) == msg["latency_ms"]
+        assert row["coordinates"] == msg["coordinates"] == "camera"
         assert int(row["body_id"]) == body["id"] and row["state"] == body["state"]
         for name in EVAL_JOINTS:
             joint = body["joints"][name]
@@ -368,3 +370,44 @@ def test_unwritable_paths_raise_output_error(tmp_path, builtin_body):
         open_recording(blocker, builtin_body)
     with pytest.raises(OutputError, match=re.escape(str(target))):
         open_recording(target, builtin_body)
+
+
+# ---------------------------------------------------------------------------- world frame
+def test_bvh_and_csv_follow_the_messages_world_frame(tmp_path, builtin_body):
+    """A message carrying ``camera_to_world`` puts the BVH in that world (oracle: forward
+    kinematics moved by the transform); the same poses sent in world coordinates give the
+    same rows; before any pose, the rest pose stands on the floor at the origin."""
+    from swarmpose.core.world import normal_of_angles, transform_points, transform_poses, world_from_floor
+
+    poses = camera_poses(builtin_body, "walk", 6)
+    t = world_from_floor(normal_of_angles(12.0, 2.0), 1.3, poses[0, 0:3])
+    camera_file, world_file = tmp_path / "camera.bvh", tmp_path / "world.bvh"
+    as_camera, as_world = BvhSink(camera_file, builtin_body), BvhSink(world_file, builtin_body)
+    csv_sink = CsvSink(tmp_path / "poses.csv")
+    for k, h in enumerate(poses):
+        plain = message(k, [entry(k, h)])
+        if k == 0:  # no pose yet, but the world known: the rest pose on the floor
+            as_camera.frame({**plain, "bodies": [], "camera_to_world": t.tolist()}, None)
+        as_camera.frame({**plain, "camera_to_world": t.tolist()}, None)
+        world = {**message(k, [entry(k, transform_poses(t, h))]), "coordinates": "world",
+                 "camera_to_world": t.tolist()}
+        validate(world)
+        as_world.frame(world, None)
+        csv_sink.frame(world, None)
+    for sink in (as_camera, as_world, csv_sink):
+        sink.close()
+    _, heads = forward_kinematics(builtin_body.rig, poses)
+    want = 100.0 * transform_points(t, heads)
+    got = own_positions(camera_file, builtin_body.bone_names)
+    np.testing.assert_allclose(got[1:], want, atol=1e-3)
+    np.testing.assert_allclose(bvhio_positions(camera_file, builtin_body.bone_names, len(poses) + 1)[1:], want,
+                               atol=1e-3)
+    np.testing.assert_allclose(own_positions(world_file, builtin_body.bone_names), want, atol=1e-3)
+    rest = got[0]
+    assert rest[0] == pytest.approx([0.0, 100.0 * builtin_body.floor_offset, 0.0], abs=1e-3)  # pelvis over origin
+    head = builtin_body.bone_names.index("head")
+    assert rest[head, 1] > rest[0, 1] + 40  # upright
+    rows = list(csv.DictReader((tmp_path / "poses.csv").open()))
+    assert {r["coordinates"] for r in rows} == {"world"}
+    first_root = [float(rows[0][name]) for name in ("tx", "ty", "tz")]
+    assert first_root == pytest.approx(transform_points(t, poses[0, 0:3]), abs=1e-5)

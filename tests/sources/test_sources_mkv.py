@@ -188,7 +188,7 @@ def test_registration_puts_the_ir_drawing_on_the_colour_drawing(source, frame, r
 def test_truncated_recordings_end_cleanly(tmp_path):
     """A copy of the first N bytes: without the headers it does not open; without a complete capture
     it raises when read; cut inside the depth block it yields the colour-only capture as a
-    SkippedFrame and ends. Never another exception."""
+    SkippedFrame and ends in error, since none of its frames could be read. Never another exception."""
     data = MKV.read_bytes()
     cut = tmp_path / "cut.mkv"
     cut.write_bytes(data[:5000])
@@ -200,7 +200,7 @@ def test_truncated_recordings_end_cleanly(tmp_path):
     cut.write_bytes(data[:700_000])  # colour complete, depth block cut
     with open_source(f"mkv:{cut}") as src:
         items = list(src)
-        assert src.status == "ended"
+        assert src.status.startswith("error: none of its 1 frames could be read")
     assert len(items) == 1 and isinstance(items[0], SkippedFrame)
     assert "without the DEPTH frame" in items[0].reason
 
