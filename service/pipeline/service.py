@@ -194,7 +194,8 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
     worker = Worker(lambda: open_source(uri), parts.pipeline, sinks, camera=config.camera_id, drop_stale=not replay,
                     pace_fps=pace, loop=config.loop and not replay, frames=config.frames,
                     status_period_s=config.status_period_s, reopen_s=config.reopen_s, source_uri=uri,
-                    detector_spec=parts.config.detector, zenoh_state=zenoh.state if zenoh else None, source=parts.source)
+                    detector_spec=parts.config.detector, zenoh_state=zenoh.state if zenoh else None,
+                    source=parts.source)
     return worker, parts, zenoh
 
 
