@@ -48,8 +48,9 @@ def cmd_subscribe(args: argparse.Namespace) -> int:
     if client.rejected:
         print(f"rejected {client.rejected} messages; last: {client.last_error}", file=sys.stderr)
     if args.count and received < args.count:
-        print(f"swarmpose subscribe: got {received} of {args.count} frames before the {args.timeout:g} s timeout",
-              file=sys.stderr)
+        why = (f"worker {', '.join(sorted(client.ended))} ended" if client.ended and not client.live
+               else f"the {args.timeout:g} s timeout")
+        print(f"swarmpose subscribe: got {received} of {args.count} frames before {why}", file=sys.stderr)
         return 1
     return 0
 

@@ -31,8 +31,8 @@ from swarmpose.tracking.config import TrackerConfig
 
 INTERRUPTED = 130
 """The exit status of a run SIGINT or SIGTERM stopped (its files closed, holding every frame tracked)."""
-TRACK_SETTINGS = ("source", "detector", "body", "shape", *leaves(TrackerConfig), "camera_id", "frames", "overlay",
-                  "coordinates", "floor", "view", "view_url", "view_port", "rrd")
+TRACK_SETTINGS = ("source", "detector", "models", "body", "shape", *leaves(TrackerConfig), "camera_id", "frames",
+                  "overlay", "coordinates", "floor", "view", "view_url", "view_port", "rrd")
 """The settings ``track`` and ``eval`` take (``serve`` and ``replay`` take these and the service's)."""
 
 

@@ -38,7 +38,7 @@ NETWORKS = {"movenet": "movenet_singlepose_lightning.onnx", "blazepose": "blazep
 
 ONNX_OPTIONS = {"adapter": str, "threads": int, "margin": float, "refine": parse_bool}
 MODELS_HELP = ("put the .onnx file there or name a folder with --models DIR / SWARMPOSE_MODELS (README.md, "
-               "'Models': where the files come from), or pass --detector onnx:PATH")
+               "'2D joints': where the files come from), or pass --detector onnx:PATH")
 
 
 def model_folders(models: str = "") -> list[Path]:
@@ -55,12 +55,13 @@ def model_folders(models: str = "") -> list[Path]:
 def find_network(name: str, models: str = "") -> Path:
     """The ONNX file of network ``name`` (a key of :data:`NETWORKS`) in the first of :func:`model_folders`
     that holds it; ConfigError naming every folder tried and the fix otherwise."""
+    if models and not Path(models).expanduser().is_dir():  # a misspelt folder must not fall through to others
+        raise ConfigError(f"--models {models}: no such folder; name the folder that holds {NETWORKS[name]} "
+                          "(in a container: mount it there)")
     folders = model_folders(models)
     for folder in folders:
         if (folder / NETWORKS[name]).is_file():
             return folder / NETWORKS[name]
-    if models and not Path(models).expanduser().is_dir():
-        raise ConfigError(f"--models {models}: no such folder; name the folder that holds {NETWORKS[name]}")
     tried = ", ".join(str(f) for f in folders)
     raise ConfigError(f"--detector {name}: {NETWORKS[name]} is not in any models folder ({tried}); {MODELS_HELP}")
 

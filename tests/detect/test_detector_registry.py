@@ -186,3 +186,14 @@ def test_auto_replays_recorded_detections_and_otherwise_runs_a_network(sequence,
             make_detector("auto", still)
     finally:
         still.close()
+
+
+@pytest.mark.parametrize("command", ["track", "eval"])
+def test_the_models_flag_reaches_the_detector(command, sequence, tmp_path, capsys):
+    """``--models DIR`` on the command line is where a named network is looked for first."""
+    from swarmpose.cli.main import main
+
+    missing = tmp_path / "no-models-here"
+    assert main([command, "--source", str(sequence), "--detector", "movenet", "--models", str(missing),
+                 "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    assert f"--models {missing}: no such folder" in capsys.readouterr().err
