@@ -22,20 +22,17 @@ from __future__ import annotations
 
 import argparse
 import json
-from contextlib import ExitStack
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from swarmpose.bench.accuracy import make_sequence
+from swarmpose.bench.accuracy import make_sequence, track_with_truth
 from swarmpose.bench.detect import find_assets
 from swarmpose.bench.matrix import DETECTORS, Sequence
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.pipeline.config import ServiceConfig
-from swarmpose.pipeline.run import RunSummary, results
-from swarmpose.pipeline.service import open_parts
 from swarmpose.tracking.config import TrackerConfig
 from swarmpose.tracking.one_euro import PoseFilter
 
@@ -50,22 +47,12 @@ SETTINGS = [(1.0, 0.5), (1.0, 2.0), (2.0, 2.0), (3.0, 5.0), (4.0, 10.0), (6.0, 1
 
 
 def track(folder: Path, seq: Sequence, detector: str, assets: Path, tracker: TrackerConfig, frames: int):
-    """Poses (F, 36) (NaN rows: lost), timestamps (F,) s, truth (F, J, 3) m and the tracking body."""
+    """Poses (F, 36) (NaN rows: lost), timestamps (F,) s and truth (F, J, 3) m of ``folder`` tracked."""
     config = ServiceConfig(source=str(folder), detector=DETECTORS[detector].format(assets=assets),
                            body=f"makehuman:{assets}/bodies/makehuman", shape=seq.shape, tracker=tracker,
                            overlay=False)
-    poses, times, done = [], [], []
-    with ExitStack() as stack:
-        parts = open_parts(config, stack, score=False, need_ground_truth=True)
-        truth_of = parts.source.ground_truth
-        for result in results(parts.source, parts.pipeline, frames, RunSummary()):
-            body = result.bodies[0] if result.bodies else None
-            ok = body is not None and body.state != "lost" and body.pose is not None
-            poses.append(body.pose if ok else np.full(36, np.nan))
-            times.append(result.timestamp_ns * 1e-9)
-            done.append(result.index)
-        truth = truth_of.joints3d[[truth_of.row(f) for f in done]]
-        return np.asarray(poses), np.asarray(times), truth, parts.body
+    run = track_with_truth(config, frames)
+    return run.poses, run.times_s, run.truth
 
 
 def filtered(poses: np.ndarray, times: np.ndarray, cutoff: float, beta: float) -> np.ndarray:
@@ -117,10 +104,11 @@ def main() -> None:
         if raw.exists():  # the unfiltered run of an earlier call (tracking is seeded: it would repeat)
             saved = np.load(raw)
             poses, times, truth = saved["poses"], saved["times"], saved["truth"]
-            body = load_body(f"makehuman:{assets}/bodies/makehuman", seq.shape).tracking_lod(tracker.triangles)
         else:
-            poses, times, truth, body = track(folder, seq, args.detector, assets, tracker, args.frames)
+            poses, times, truth = track(folder, seq, args.detector, assets, tracker, args.frames)
             np.savez(raw, poses=poses, times=times, truth=truth)
+        body = load_body(f"makehuman:{assets}/bodies/makehuman", seq.shape)
+        body = body if len(body.triangles) <= tracker.triangles else body.tracking_lod(tracker.triangles)
         fps = 1.0 / float(np.median(np.diff(times)))
         lost = ~np.isfinite(poses[:, 0])
         runs = {"off": poses} | {f"one-euro {c:g} Hz, beta {b:g}": filtered(poses, times, c, b) for c, b in SETTINGS}
@@ -131,7 +119,7 @@ def main() -> None:
             print(json.dumps(rows[-1]), flush=True)
         if seq is SEQUENCES[0] and not args.no_check:  # the offline filter must be what the tracker publishes
             c, b = SETTINGS[1]
-            real, _, _, _ = track(folder, seq, args.detector, assets,
+            real, _, _ = track(folder, seq, args.detector, assets,
                                   replace(tracker, smoothing="one-euro", smoothing_cutoff_hz=c, smoothing_beta=b),
                                   args.frames)
             expected = runs[f"one-euro {c:g} Hz, beta {b:g}"]

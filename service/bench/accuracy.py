@@ -32,7 +32,7 @@ from swarmpose.bench.detect import find_assets
 from swarmpose.bench.matrix import DETECTORS, MODES, MOTIONS, Cell, Sequence, cells
 from swarmpose.bench.store import read_record, tracker_settings, write_record
 from swarmpose.body.loader import load_body
-from swarmpose.body.skeleton import EVAL_JOINTS
+from swarmpose.body.skeleton import EVAL_JOINTS, POSE_DIM
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.progress import progress_bar
@@ -102,7 +102,8 @@ class TrackedRun:
     """One source tracked against its ground truth: estimates and truth (F, J, 3) m in
     ``EVAL_JOINTS`` order (NaN rows where the body was lost), the detections (Joints2D or
     None per frame), lost frames, the run's summary, the camera and every frame's timings
-    (ms, the frame message's ``timings_ms``)."""
+    (ms, the frame message's ``timings_ms``), the published poses (F, 36) (NaN rows: lost) and the
+    frames' capture times (F,) s."""
 
     estimates: np.ndarray
     truth: np.ndarray
@@ -111,12 +112,14 @@ class TrackedRun:
     summary: RunSummary
     intrinsics: Intrinsics
     timings: list[dict[str, float]]
+    poses: np.ndarray
+    times_s: np.ndarray
 
 
 def track_with_truth(config: ServiceConfig, frames: int = 0) -> TrackedRun:
     """Track ``config``'s source (its first ``frames``; 0 = all) and collect estimates beside its ground truth."""
     summary = RunSummary()
-    estimates, detections, timings, done, lost = [], [], [], [], 0
+    estimates, detections, timings, done, poses, times, lost = [], [], [], [], [], [], 0
     with ExitStack() as stack:
         parts = open_parts(config, stack, score=False, need_ground_truth=True)
         truth_of = parts.source.ground_truth
@@ -126,12 +129,15 @@ def track_with_truth(config: ServiceConfig, frames: int = 0) -> TrackedRun:
             found = body is not None and body.state != "lost"
             lost += not found
             estimates.append(body.joints3d if found else np.full((len(EVAL_JOINTS), 3), np.nan))
+            poses.append(body.pose if found and body.pose is not None else np.full(POSE_DIM, np.nan))
+            times.append(result.timestamp_ns * 1e-9)
             detections.append(body.detection if body is not None else None)
             timings.append(dict(result.timings_ms))
             done.append(result.index)
     truth = truth_of.joints3d[[truth_of.row(f) for f in done]]
     return TrackedRun(np.asarray(estimates, float).reshape(-1, len(EVAL_JOINTS), 3), truth, detections, lost,
-                      summary, intrinsics, timings)
+                      summary, intrinsics, timings, np.asarray(poses, float).reshape(-1, POSE_DIM),
+                      np.asarray(times, float))
 
 
 def scores(run: TrackedRun) -> dict:

@@ -4,6 +4,20 @@ from __future__ import annotations
 
 import argparse
 import math
+import signal
+from collections.abc import Callable
+from contextlib import ExitStack
+
+INTERRUPTED = 130
+"""The exit status of a run SIGINT or SIGTERM stopped (its files closed, holding every frame tracked)."""
+INTERRUPTED_NOTE = "interrupted; the outputs hold the frames tracked so far"
+
+
+def stop_on_signals(stop: Callable[[], object], stack: ExitStack) -> None:
+    """SIGINT and SIGTERM call ``stop()``; ``stack`` puts the previous handlers back."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        previous = signal.signal(sig, lambda *_: stop())
+        stack.callback(signal.signal, sig, previous)
 
 
 class DefaultsFormatter(argparse.HelpFormatter):

@@ -14,13 +14,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
 import time
 from contextlib import ExitStack
 from pathlib import Path
 
-from swarmpose.cli.common import DEFAULTS, quiet, seconds
+from swarmpose.cli.common import DEFAULTS, INTERRUPTED, INTERRUPTED_NOTE, quiet, seconds, stop_on_signals
 from swarmpose.cli.settings import add_flags, load
 from swarmpose.cli.track import add_source_argument, settings_of
 from swarmpose.core.errors import ConfigError
@@ -33,22 +32,12 @@ from swarmpose.pipeline.worker import Worker
 REPLAY_DEFAULTS = {"zenoh_mode": "off"}
 REPLAY_SETTINGS = tuple(name for name in leaves(ServiceConfig) if name not in ("loop", "record"))
 """The settings ``replay`` takes: it writes into ``--out`` and ends with the recording."""
-INTERRUPTED = 130
-
-
-def stop_on_signals(worker: Worker, stack: ExitStack) -> None:
-    """SIGINT and SIGTERM stop ``worker``; ``stack`` puts the previous handlers back."""
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        previous = signal.signal(sig, lambda *_: worker.stop())
-        stack.callback(signal.signal, sig, previous)
-
-
 def cmd_serve(args: argparse.Namespace) -> int:
     """Run the worker and publish over zenoh until the source ends or a signal comes."""
     config = settings_of(args)
     with ExitStack() as stack:
         worker, _, _ = build_worker(config, stack, replay=False)
-        stop_on_signals(worker, stack)
+        stop_on_signals(worker.stop, stack)
         z = config.zenoh
         where = f"zenoh {z.zenoh_mode}" + (f", connect {', '.join(z.connect)}" if z.connect else "") + (
             f", listen {', '.join(z.listen)}" if z.listen else "")
@@ -63,7 +52,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     config = settings_of(args, REPLAY_DEFAULTS)
     with ExitStack() as stack:
         worker, parts, _ = build_worker(config, stack, replay=True, out=args.out, progress=not quiet(args))
-        stop_on_signals(worker, stack)
+        stop_on_signals(worker.stop, stack)
         started = time.monotonic()
         stats = worker.run()
     result = run_summary(parts, stats, time.monotonic() - started, worker)
@@ -77,7 +66,7 @@ def replay_status(worker: Worker) -> int:
     if worker.state in ("source-failed", "failed"):
         return 1
     if worker.state == "stopping":
-        print("swarmpose replay: interrupted; the outputs hold the frames tracked so far", file=sys.stderr)
+        print(f"swarmpose replay: {INTERRUPTED_NOTE}", file=sys.stderr)
         return INTERRUPTED
     return 1 if worker.sink_errors else 0
 

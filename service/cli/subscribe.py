@@ -41,14 +41,14 @@ def cmd_subscribe(args: argparse.Namespace) -> int:
                                          until_workers_end=not args.forever):
                 received += 1
                 say(format_frame(message))
-            if client.ended and not client.live and not args.forever:
+            if client.workers_ended and not args.forever:
                 say(f"worker {', '.join(sorted(client.ended))} ended; {received} frames received")
     except KeyboardInterrupt:
         pass
     if client.rejected:
         print(f"rejected {client.rejected} messages; last: {client.last_error}", file=sys.stderr)
     if args.count and received < args.count:
-        why = (f"worker {', '.join(sorted(client.ended))} ended" if client.ended and not client.live
+        why = (f"worker {', '.join(sorted(client.ended))} ended" if client.workers_ended
                else f"the {args.timeout:g} s timeout")
         print(f"swarmpose subscribe: got {received} of {args.count} frames before {why}", file=sys.stderr)
         return 1

@@ -13,13 +13,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
 import threading
 from contextlib import ExitStack
 
 from swarmpose.body.skeleton import EVAL_JOINTS
-from swarmpose.cli.common import DEFAULTS, quiet
+from swarmpose.cli.common import DEFAULTS, INTERRUPTED, INTERRUPTED_NOTE, quiet, stop_on_signals
 from swarmpose.cli.settings import add_flags, from_args
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import leaves
@@ -29,8 +28,6 @@ from swarmpose.pipeline.service import Parts, format_accuracy, open_parts, score
 from swarmpose.sim.evaluate import plot_accuracy
 from swarmpose.tracking.config import TrackerConfig
 
-INTERRUPTED = 130
-"""The exit status of a run SIGINT or SIGTERM stopped (its files closed, holding every frame tracked)."""
 TRACK_SETTINGS = ("source", "detector", "models", "body", "shape", *leaves(TrackerConfig), "camera_id", "frames",
                   "overlay", "coordinates", "floor", "view", "view_url", "view_port", "rrd")
 """The settings ``track`` and ``eval`` take (``serve`` and ``replay`` take these and the service's)."""
@@ -58,12 +55,11 @@ def run_tracking(args: argparse.Namespace, *, score: bool) -> tuple[ServiceConfi
     with ExitStack() as stack:
         parts = open_parts(config, stack, out=args.out or "", score=score, need_ground_truth=score)
         if threading.current_thread() is threading.main_thread():  # SIGINT/SIGTERM: end after this frame
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                stack.callback(signal.signal, sig, signal.signal(sig, lambda *_: stop.set()))
+            stop_on_signals(stop.set, stack)
         summary = run_sequence(parts.source, parts.pipeline, parts.sinks, camera=config.camera_id,
                                frames=config.frames, progress=not quiet(args), stop=stop)
     if summary.interrupted:
-        print("swarmpose: interrupted; the outputs hold the frames tracked so far", file=sys.stderr)
+        print(f"swarmpose: {INTERRUPTED_NOTE}", file=sys.stderr)
     return config, parts, summary
 
 

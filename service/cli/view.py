@@ -11,11 +11,11 @@ streamed to ``--view-url``). See :mod:`swarmpose.publish.rerun_files`.
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 import threading
+from contextlib import ExitStack
 
-from swarmpose.cli.common import DEFAULTS
+from swarmpose.cli.common import DEFAULTS, stop_on_signals
 from swarmpose.cli.settings import add_flags, from_args
 from swarmpose.pipeline.config import ServiceConfig
 from swarmpose.publish.rerun_files import log_recording
@@ -33,13 +33,10 @@ def served(config: ServiceConfig) -> bool:
 def wait_for_signal() -> None:
     """Block until SIGINT or SIGTERM (the previous handlers are put back)."""
     stop = threading.Event()
-    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
+    with ExitStack() as stack:
+        stop_on_signals(stop.set, stack)
         while not stop.wait(0.5):
             pass
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
 
 
 def cmd_view(args: argparse.Namespace) -> int:

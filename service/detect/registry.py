@@ -55,8 +55,9 @@ def model_folders(models: str = "") -> list[Path]:
 def find_network(name: str, models: str = "") -> Path:
     """The ONNX file of network ``name`` (a key of :data:`NETWORKS`) in the first of :func:`model_folders`
     that holds it; ConfigError naming every folder tried and the fix otherwise."""
-    if models and not Path(models).expanduser().is_dir():  # a misspelt folder must not fall through to others
-        raise ConfigError(f"--models {models}: no such folder; name the folder that holds {NETWORKS[name]} "
+    first = models or os.environ.get("SWARMPOSE_MODELS", "")
+    if first and not Path(first).expanduser().is_dir():  # a misspelt folder must not fall through to others
+        raise ConfigError(f"--models {first}: no such folder; name the folder that holds {NETWORKS[name]} "
                           "(in a container: mount it there)")
     folders = model_folders(models)
     for folder in folders:

@@ -39,7 +39,7 @@ from swarmpose.detect.joints import Detector, Joints2D
 from swarmpose.detect.people import Segmentation, segment_people
 from swarmpose.detect.per_person import PersonDetection, detect_each
 from swarmpose.gpu.errors import DeviceError
-from swarmpose.pipeline.world import WorldFrame
+from swarmpose.pipeline.world import NOT_FITTED, WorldFrame
 from swarmpose.sources.base import Frame, SkippedFrame, exc_message
 from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.people_tracker import PeopleTracker
@@ -147,7 +147,7 @@ class FramePipeline:
         detection = self._detect(frame)
         if self.world is not None:  # the floor until known (the segmentation's own fit where it made one)
             seg = detection.segmentation
-            self.world.observe_depth(frame, seg.floor if seg is not None else None)
+            self.world.observe_depth(frame, seg.floor if seg is not None else NOT_FITTED)
             detection.ms = 1000 * (time.perf_counter() - t0)
         return detection
 
@@ -193,8 +193,7 @@ class FramePipeline:
     def track(self, frame: Frame, detection: Detection, received_ns: int = 0) -> FrameResult:
         """The bodies of ``frame`` given its detection; never raises for a frame it cannot track.
         received_ns: wall-clock time (ns) the frame was taken from its source (0: unknown)."""
-        result = self._track(frame, detection, received_ns)
-        return result if self.world is None else self.in_world(result)
+        return self.in_world(self._track(frame, detection, received_ns))
 
     def in_world(self, result: FrameResult) -> FrameResult:
         """``result`` with the world state as known after it (the origin set by its first tracked

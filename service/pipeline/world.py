@@ -27,6 +27,7 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -42,6 +43,8 @@ EAGER_FRAMES = 30
 """The floor is fitted on every one of a camera's first this many frames until it fits..."""
 RETRY_FRAMES = 30
 """...then on every this many-th frame (about 8 ms a fit at 640x480)."""
+NOT_FITTED = object()
+"""``observe_depth``'s ``fitted`` when nothing fitted the frame's floor yet."""
 
 
 class WorldFrame:
@@ -58,15 +61,15 @@ class WorldFrame:
             raise ConfigError(f"coordinates {coordinates!r}: choose one of {COORDINATES}")
         self.coordinates = coordinates
         self.auto = floor == "auto"
-        self.given = None if self.auto else load_extrinsics(floor)
-        self.state: WorldState | None = self.given
+        self.state: WorldState | None = None if self.auto else load_extrinsics(floor)
         self._intrinsics: Intrinsics | None = None
         self._frames = 0
         self._lock = threading.Lock()
 
-    def observe_depth(self, frame: Frame, fitted: FloorPlane | None = None) -> None:
+    def observe_depth(self, frame: Frame, fitted: FloorPlane | None | object = NOT_FITTED) -> None:
         """Fit the floor to ``frame``'s depth when it is not known yet and this frame is due;
-        ``fitted``: a floor the segmentation already fitted to this frame (spares a fit)."""
+        ``fitted``: what the segmentation's own fit of this frame found (a plane, or None: no
+        floor in view), which spares a second fit; :data:`NOT_FITTED`: nothing fitted it yet."""
         if not self.auto:
             return
         with self._lock:
@@ -79,7 +82,7 @@ class WorldFrame:
         if not due:
             return
         plane = fitted
-        if plane is None:
+        if plane is NOT_FITTED:
             try:
                 plane = fit_floor(frame.depth, frame.intrinsics)
             except Exception as exc:  # a frame the fit cannot use: try a later one
@@ -105,7 +108,7 @@ class WorldFrame:
             if root is None:
                 return state
             transform = world_from_floor(state.floor_normal, state.floor_offset_m, root)
-            self.state = WorldState(state.floor_normal, state.floor_offset_m, state.source, state.inliers, transform)
+            self.state = replace(state, camera_to_world=transform)
             return self.state
 
     def info(self) -> dict:

@@ -24,8 +24,6 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 
-import zenoh
-
 from swarmpose.core.errors import ProtocolError
 from swarmpose.messages import check_camera_id, decode, keys, validate
 from swarmpose.publish.zenoh_link import open_session, zenoh_config
@@ -89,6 +87,8 @@ class Client:
 
     def _on_alive(self, sample) -> None:
         """A worker's liveliness token appeared (PUT) or went away (DELETE: it stopped or vanished)."""
+        import zenoh  # here, as in zenoh_link: `swarmpose` commands that never subscribe do not load zenoh
+
         camera = str(sample.key_expr).split("/")[1]
         with self._lock:
             if sample.kind == zenoh.SampleKind.DELETE:
@@ -100,6 +100,11 @@ class Client:
             else:
                 self.live.add(camera)
                 self.ended.discard(camera)
+
+    @property
+    def workers_ended(self) -> bool:
+        """Every worker the client saw has ended (and one was seen)."""
+        return bool(self.ended) and not self.live
 
     def _enqueue(self, message: dict) -> None:
         while True:
@@ -133,7 +138,7 @@ class Client:
             except queue.Empty:
                 return
             if message is _WORKERS_ENDED:
-                if until_workers_end and not self.live:
+                if until_workers_end and self.workers_ended:
                     return
                 continue
             got += 1

@@ -29,15 +29,7 @@ from swarmpose.body.skeleton import EVAL_JOINTS, POSE_DIM
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.errors import OutputError
 from swarmpose.messages import POSE_NAMES, encode
-from swarmpose.publish.bvh_file import (
-    BVH_UNITS_PER_M,
-    CAMERA_TO_BVH,
-    UPRIGHT,
-    BvhSink,
-    PerIdBvhSink,
-    bvh_path,
-    bvh_transform,
-)
+from swarmpose.publish.bvh_file import PerIdBvhSink
 from swarmpose.publish.file_sink import FileSink, write_error
 from swarmpose.publish.overlay import OverlaySink
 from swarmpose.publish.sink import Sink
@@ -149,5 +141,4 @@ def open_recording(out_dir: str | Path, body: SkinnedBody, fps: float = 30.0, ov
     return sinks
 
 
-__all__ = ["BVH_UNITS_PER_M", "CAMERA_TO_BVH", "CSV_COLUMNS", "UPRIGHT", "BvhSink", "CsvSink", "JsonlSink",
-           "PerIdBvhSink", "bvh_path", "bvh_transform", "csv_rows", "open_recording"]
+__all__ = ["CSV_COLUMNS", "CsvSink", "JsonlSink", "csv_rows", "open_recording"]

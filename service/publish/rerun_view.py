@@ -41,6 +41,7 @@ import numpy as np
 
 from swarmpose.body.skeleton import EVAL_JOINTS, EVAL_LINKS
 from swarmpose.core.camera import Intrinsics
+from swarmpose.detect.floor import sample_grid
 from swarmpose.publish.overlay import id_color
 from swarmpose.publish.rerun_stream import Stream, open_stream
 from swarmpose.sources.base import Frame
@@ -63,15 +64,12 @@ def depth_points(frame: Frame, step: int = DEPTH_STEP) -> tuple[np.ndarray, np.n
     """The point cloud of ``frame``: positions (N, 3) float32 m in the camera frame of the
     valid pixels (depth > 0 and finite) of the grid ``depth[::step, ::step]``, row by row,
     and their colours (N, 3) uint8 RGB from the colour image (None without one)."""
-    depth = np.asarray(frame.depth, dtype=np.float32)[::step, ::step]
-    k = frame.intrinsics
-    rows, cols = np.nonzero(np.isfinite(depth) & (depth > 0))
-    z = depth[rows, cols]
-    u, v = cols.astype(np.float32) * step, rows.astype(np.float32) * step
-    points = np.stack([(u - k.cx) / k.fx * z, (v - k.cy) / k.fy * z, z], axis=-1).astype(np.float32)
+    grid = sample_grid(np.asarray(frame.depth), frame.intrinsics, step, np.inf)
+    valid = np.isfinite(grid[..., 2])
+    points = grid[valid].astype(np.float32)
     colors = None
     if frame.color is not None:
-        colors = np.asarray(frame.color)[rows * step, cols * step, :3].astype(np.uint8)
+        colors = np.asarray(frame.color)[::step, ::step, :3][valid].astype(np.uint8)
     return points, colors
 
 

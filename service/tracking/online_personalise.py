@@ -37,7 +37,8 @@ class PersonalisingTracker(BodyTracker):
     def __init__(self, space: ShapeSpace, needed: int, intrinsics: Intrinsics, config: TrackerConfig | None = None,
                  context: ClContext | None = None, body_id: int = 0, settings: FitSettings | None = None):
         config = config or TrackerConfig()
-        super().__init__(space.tracking_body(space.start), intrinsics, config, context, body_id)
+        self.start_body = space.tracking_body(space.start)
+        super().__init__(self.start_body, intrinsics, config, context, body_id)
         self.space, self.needed = space, int(needed)
         self.settings = settings or FitSettings(seed=config.seed)
         self.samples: list[ShapeSample] = []
@@ -47,8 +48,8 @@ class PersonalisingTracker(BodyTracker):
     def new_person(self) -> None:
         """Another person: the start body again, and a new personalisation."""
         super().new_person()
-        if self.state != "collecting" or self.samples:
-            self.set_body(self.space.tracking_body(self.space.start))
+        if self.state != "collecting":  # a collecting tracker still has the start body
+            self.set_body(self.start_body)
         self.samples, self.state, self.reason, self.found = [], "collecting", "", {}
 
     def step(self, frame: Frame, joints: Joints2D | None, others_removed: bool = False) -> BodyResult:

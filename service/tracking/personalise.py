@@ -42,6 +42,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from swarmpose.body.kinematics import quaternion_to_matrix
+from swarmpose.body.parametric_sdf import signed_volume
 from swarmpose.body.shape_space import ShapeSpace
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
@@ -146,7 +147,7 @@ def spread_frames(poses: Sequence[np.ndarray], count: int) -> list[int]:
     angles and the root quaternion (rad / unitless), starting from the first."""
     if len(poses) <= count:
         return list(range(len(poses)))
-    feats = np.stack([np.concatenate([p[3:7], p[7:]]) for p in poses])
+    feats = np.stack([p[3:] for p in poses])
     chosen = [0]
     dist = np.linalg.norm(feats - feats[0], axis=1)
     while len(chosen) < count:
@@ -283,7 +284,9 @@ def _sweep(space: ShapeSpace, keys: list[_KeyFrame], refit: Callable[[SkinnedBod
         x = space.start
         for (i, _), value in zip(axes, combo):
             x[i] = value
-        candidates.append(space.clip(x))
+        x = space.clip(x)
+        if not any(np.allclose(x, c) for c in candidates):  # e.g. the start itself: its fit would repeat
+            candidates.append(x)
     initial = [k.pose for k in keys]
     best, best_energy, best_poses = candidates[0], np.inf, initial
     for x in candidates:
@@ -299,8 +302,6 @@ def _sweep(space: ShapeSpace, keys: list[_KeyFrame], refit: Callable[[SkinnedBod
 
 def body_measures(body: SkinnedBody) -> dict[str, float]:
     """``height_m`` (vertical extent of the rest mesh) and ``volume_l`` (enclosed volume of the
-    rest mesh, litres, through trimesh) of ``body``."""
-    import trimesh
-
-    mesh = trimesh.Trimesh(np.asarray(body.vertices), np.asarray(body.triangles), process=False)
-    return {"height_m": round(body.height, 4), "volume_l": round(abs(float(mesh.volume)) * 1000.0, 2)}
+    rest mesh, litres, by the divergence theorem) of ``body``."""
+    volume = abs(signed_volume(np.asarray(body.vertices, dtype=np.float64), np.asarray(body.triangles)))
+    return {"height_m": round(body.height, 4), "volume_l": round(volume * 1000.0, 2)}

@@ -58,6 +58,7 @@ def test_a_slider_shape_loads_as_a_body_spec():
 
 @needs_assets
 def test_tracking_bodies_keep_one_topology_and_follow_the_full_surface():
+    from swarmpose.body.loader import load_body
     from swarmpose.body.shape_space import MakeHumanSpace
 
     space = MakeHumanSpace(MAKEHUMAN)
@@ -69,6 +70,8 @@ def test_tracking_bodies_keep_one_topology_and_follow_the_full_surface():
         d = surface_distance(full.vertices, full.triangles, lod.vertices)
         assert d.mean() < 0.002 and d.max() < 0.012, (name, d.mean(), d.max())
         np.testing.assert_allclose(lod.bone_heads, full.bone_heads)
+        # and the rig is the preset's own, loaded the ordinary way (an oracle apart from the space)
+        np.testing.assert_allclose(lod.bone_heads, load_body(f"makehuman:{MAKEHUMAN}", name).bone_heads, atol=1e-6)
         assert abs(lod.height - full.height) < 0.01
 
 

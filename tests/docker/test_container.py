@@ -20,13 +20,12 @@ import os
 import shutil
 import signal
 import subprocess
-import time
 from pathlib import Path
 
 import jsonschema
 import pytest
 import zenoh
-from conftest import REPO, free_port
+from conftest import REPO, free_port, wait_until
 
 from swarmpose.cli.main import main
 
@@ -53,14 +52,6 @@ def podman(*args: str, timeout: float = 60, check: bool = True) -> subprocess.Co
         raise AssertionError(f"podman {' '.join(args)}: exit {result.returncode}\n{result.stdout}{result.stderr}")
     return result
 
-
-def wait_until(predicate, timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.2)
-    return False
 
 
 @pytest.fixture(scope="module")

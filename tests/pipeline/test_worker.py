@@ -19,8 +19,8 @@ import pytest
 
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import EVAL_JOINTS
+from swarmpose.cli.common import stop_on_signals
 from swarmpose.cli.main import main
-from swarmpose.cli.serve import stop_on_signals
 from swarmpose.core.errors import DetectorError, OutputError, SourceError
 from swarmpose.detect.registry import make_detector
 from swarmpose.messages import validate
@@ -257,7 +257,7 @@ def test_a_signal_while_the_main_thread_holds_the_lock_stops_at_once(wave_sequen
     worker = make_worker(wave_sequence, body, [Collect()])
     safety = threading.Timer(5.0, worker._lock.release)   # would unblock a deadlocked stop()
     with ExitStack() as stack:
-        stop_on_signals(worker, stack)
+        stop_on_signals(worker.stop, stack)
         worker._lock.acquire()
         safety.start()
         t0 = time.monotonic()

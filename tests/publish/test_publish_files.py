@@ -25,7 +25,8 @@ from swarmpose.core.errors import OutputError
 from swarmpose.messages import POSE_NAMES, body_message, frame_message, validate
 from swarmpose.motion.builtin import builtin_motion
 from swarmpose.motion.bvh import read_bvh
-from swarmpose.publish.files import UPRIGHT, BvhSink, CsvSink, JsonlSink, PerIdBvhSink, open_recording
+from swarmpose.publish.bvh_file import UPRIGHT, BvhSink, PerIdBvhSink
+from swarmpose.publish.files import CsvSink, JsonlSink, open_recording
 from swarmpose.publish.overlay import OverlaySink
 from swarmpose.sim.synth import SynthConfig, place_camera
 

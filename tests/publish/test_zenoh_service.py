@@ -18,7 +18,7 @@ from pathlib import Path
 import jsonschema
 import pytest
 import zenoh
-from conftest import REPO, free_port
+from conftest import REPO, free_port, wait_until
 
 from swarmpose.body.loader import load_body
 from swarmpose.core.errors import PublishError
@@ -46,14 +46,6 @@ def plain_session(connect: str | None = None, listen: str | None = None, mode: s
         config.insert_json5("listen/endpoints", json.dumps([listen]))
     return zenoh.open(config)
 
-
-def wait_until(predicate, timeout: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.05)
-    return False
 
 
 @pytest.fixture(scope="module")
