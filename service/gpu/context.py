@@ -21,6 +21,7 @@ the trackers of a process (at most :data:`MAX_CONTEXTS` devices are kept).
 from __future__ import annotations
 
 import functools
+import os
 from collections import OrderedDict
 from dataclasses import dataclass
 
@@ -60,9 +61,28 @@ def _kind(device) -> str:
     return "other"
 
 
+def pin_pocl_threads() -> bool:
+    """Ask PoCL's CPU driver to pin its worker threads (``POCL_AFFINITY=1``: thread i on CPU i)
+    unless the environment already says; only where this process may run on every CPU
+    0..N-1, as PoCL aborts when a pinning is refused (a container limited to other CPUs).
+    Unpinned, the Linux scheduler now and then left both workers on one core for a while: the
+    kernel ran at half speed in 3 of 64 windows of 40 launches, pinned in none of 80
+    (BENCHMARKS.md, issue 13). PoCL reads it when it starts, at the first platform query.
+    Returns whether it is set to pin."""
+    if "POCL_AFFINITY" not in os.environ:
+        try:
+            allowed = os.sched_getaffinity(0)
+        except (AttributeError, OSError):  # not Linux
+            return False
+        if allowed == set(range(os.cpu_count() or 0)):
+            os.environ["POCL_AFFINITY"] = "1"
+    return os.environ.get("POCL_AFFINITY") == "1"
+
+
 def _platforms() -> list:
     import pyopencl as cl
 
+    pin_pocl_threads()
     try:
         return list(cl.get_platforms())
     except cl.Error as exc:  # no ICD loader entries: PLATFORM_NOT_FOUND_KHR

@@ -88,7 +88,10 @@ class ParticleScorer:
     :mod:`swarmpose.gpu.context`; None or "": the default device);
     cull_backfaces: skip back faces (exact for closed meshes); local_size: work-items per
     particle (None: 1 on CPUs, 64 on other devices); atomic: use atomic_max on the local
-    z-buffer (None: only when local_size > 1); znear: near plane in m.
+    z-buffer (None: only when local_size > 1); znear: near plane in m; vector_raster: on the
+    one-work-item (CPU) layout with a tile width that is a multiple of 8, scan, set up and draw
+    the triangles 8 at a time in vector lanes (False: one at a time, the reference the tests
+    compare it with; the z-buffers are bit-identical).
 
     ``last_timings`` holds the split of the last call in seconds: upload_s,
     kernel_s and readback_s (OpenCL event times) and wall_s (enqueue to results). One
@@ -97,7 +100,8 @@ class ParticleScorer:
 
     def __init__(self, body: SkinnedBody, intrinsics: Intrinsics, tile: tuple[int, int] = (64, 64),
                  threshold: float = 0.30, context: ClContext | str | None = None, cull_backfaces: bool = True,
-                 local_size: int | None = None, atomic: bool | None = None, znear: float = 0.05):
+                 local_size: int | None = None, atomic: bool | None = None, znear: float = 0.05,
+                 vector_raster: bool = True):
         import pyopencl as cl
 
         self._cl = cl
@@ -123,15 +127,17 @@ class ParticleScorer:
         nv, nf, nb = len(body.vertices), len(body.triangles), len(body.bone_names)
         tables = device_mesh(body)[0]
         sizes = tables.defines  # FK scratch: NJ joint and NB frame quaternions, NPT points (float4 each)
-        need = (nb * 48 + (nb + sizes["NJ"] + sizes["NPT"]) * 16 + nv * 24 + self.tw * self.th * 4
-                + (wg * 20 if wg > 1 else nf * 4))
+        vector = bool(vector_raster) and wg == 1 and not self.atomic and self.tw % 8 == 0
+        need = (nb * 48 + (nb + sizes["NJ"] + sizes["NPT"]) * 16 + nv * (16 if vector else 24)
+                + self.tw * self.th * 4 + (wg * 20 if wg > 1 else (nf + 8) * 4))
         if need > self.device.local_mem_size:
             raise ConfigError(f"{body.name} ({nv} vertices) with a {self.tw}x{self.th} tile needs {need} bytes of "
                               f"local memory, {describe(self.device)} has {self.device.local_mem_size}; "
                               "use a smaller tracking LOD (body.tracking_lod) or tile")
         self.point_count = len(tables.point_bone)
         self.defines = {"NV": nv, "NF": nf, "NB": nb, "TW": self.tw, "TH": self.th, "WG": wg,
-                        "ZATOMIC": self.atomic, "CULL": bool(cull_backfaces), "ZNEAR": float(znear), **sizes}
+                        "ZATOMIC": self.atomic, "CULL": bool(cull_backfaces), "ZNEAR": float(znear),
+                        "VECSETUP": bool(vector_raster), "VECROW": vector, **sizes}
         self._mesh = self._upload_mesh(body)
         self._capacity = 0
         self._tile_box: TileBox | None = None
@@ -143,7 +149,7 @@ class ParticleScorer:
         self._state_version = 0  # bumped whenever a kernel argument changes
         self._args_state: dict[tuple[bool, bool], tuple[int, bool]] = {}
         self._kernels: dict[tuple[bool, bool], object] = {}
-        self.last_timings: dict[str, float] = {}
+        self._last_launch: tuple | None = None  # (upload event, kernel event, read events, wall s)
 
     # ------------------------------------------------------------------ setup
     def set_body(self, body: SkinnedBody) -> None:
@@ -273,6 +279,20 @@ class ParticleScorer:
         """The current observation tile (TH, TW) float32 m, 0 = none."""
         return self._observed
 
+    @property
+    def last_timings(self) -> dict[str, float]:
+        """The split of the last launch in s: upload_s, kernel_s, readback_s (OpenCL event times)
+        and wall_s (enqueue to results); read from the events only when asked, which costs
+        ~20 us a launch ({} before the first)."""
+        if self._last_launch is None:
+            return {}
+        up, run, down, wall = self._last_launch
+
+        def dur(ev) -> float:
+            return 0.0 if ev is None else (ev.profile.end - ev.profile.start) * 1e-9
+
+        return {"upload_s": dur(up), "kernel_s": dur(run), "readback_s": sum(dur(e) for e in down), "wall_s": wall}
+
     # ------------------------------------------------------------------ per generation
     def transforms(self, h: np.ndarray) -> np.ndarray:
         """Validated poses (P, 36) -> bone transforms (P, B, 3, 4) float32 (one numpy call)."""
@@ -357,7 +377,7 @@ class ParticleScorer:
         p = len(data)
         npt = self.point_count
         if p == 0:
-            self.last_timings = {"upload_s": 0.0, "kernel_s": 0.0, "readback_s": 0.0, "wall_s": 0.0}
+            self._last_launch = (None, None, [], 0.0)
             empty = np.zeros((0, self.th, self.tw), np.float32) if write_tiles else None
             return (np.zeros(0), {k: np.zeros(0, np.int64) for k in COUNT_NAMES},
                     (np.zeros((0, npt, 3)), {k: np.zeros(0) for k in TERM_NAMES}) if fk else None, empty)
@@ -385,13 +405,7 @@ class ParticleScorer:
             tiles = np.empty((p, self.th, self.tw), np.float32)
             down.append(cl.enqueue_copy(q, tiles, self._tiles_buf, is_blocking=False))
         cl.wait_for_events(down)
-        wall = time.perf_counter() - t1
-
-        def dur(ev) -> float:
-            return (ev.profile.end - ev.profile.start) * 1e-9
-
-        self.last_timings = {"upload_s": dur(up), "kernel_s": dur(run),
-                             "readback_s": sum(dur(e) for e in down), "wall_s": wall}
+        self._last_launch = (up, run, down, time.perf_counter() - t1)
         packed = results[:, 1:5]
         if not np.all(np.isfinite(packed)):  # a result the kernel did not write: -1, as a poisoned count
             packed = np.where(np.isfinite(packed), packed, -1.0)

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import os
+
 import pyopencl as cl
 import pytest
 
 from swarmpose.core.errors import SwarmposeError
+from swarmpose.gpu import context
 from swarmpose.gpu.context import MAX_PROGRAMS, ClContext, choose_device, list_devices
 from swarmpose.gpu.errors import DeviceError, KernelBuildError
 from swarmpose.gpu.program import define_options, read_source
@@ -81,3 +84,16 @@ def test_the_program_cache_is_bounded():
         ctx.program("score.cl", {**sizes, "TW": tw})
     assert len(ctx._programs) == MAX_PROGRAMS
     assert ctx.program("score.cl", sizes) is not first  # the oldest was dropped and is built again
+
+
+def test_pocl_threads_pinned_only_where_every_cpu_is_allowed(monkeypatch):
+    """POCL_AFFINITY=1 is set where this process may run on CPUs 0..N-1 (PoCL pins thread i to
+    CPU i and aborts where that is refused), never over the user's own setting."""
+    monkeypatch.setattr(os, "cpu_count", lambda: 4)
+    monkeypatch.delenv("POCL_AFFINITY", raising=False)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {2, 3})  # a container limited to CPUs 2-3
+    assert not context.pin_pocl_threads() and "POCL_AFFINITY" not in os.environ
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2, 3})
+    assert context.pin_pocl_threads() and os.environ["POCL_AFFINITY"] == "1"
+    monkeypatch.setenv("POCL_AFFINITY", "0")
+    assert not context.pin_pocl_threads() and os.environ["POCL_AFFINITY"] == "0"
