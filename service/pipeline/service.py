@@ -123,7 +123,8 @@ def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score:
     tracking_body = body if len(body.triangles) <= triangles else body.tracking_lod(triangles)
     parts = Parts(config, tracking_body, source, detector, make_pipeline(tracking_body, detector, config, space))
     if out:
-        recording = open_recording(Path(out), tracking_body, fps=parts.fps, overlay=config.overlay)
+        body_of = parts.pipeline.body_of if space is not None else None  # --personalize: the locked shapes
+        recording = open_recording(Path(out), tracking_body, fps=parts.fps, overlay=config.overlay, body_of=body_of)
         for sink in recording:  # the run closes them; this covers a failure before it starts
             stack.callback(sink.close)
         parts.sinks.extend(recording)

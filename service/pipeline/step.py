@@ -32,6 +32,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError, SwarmposeError
 from swarmpose.detect.floor import FloorPlane
@@ -139,6 +140,15 @@ class FramePipeline:
             state = None if self.tracker is None else self.tracker.personalisation()
             bodies = [] if state is None else [state]
         return {"needed": self.personalise_frames, "bodies": bodies}
+
+    def body_of(self, body_id: int) -> SkinnedBody | None:
+        """The body the tracker of ``body_id`` tracks with now (its locked shape once
+        ``--personalize`` has fitted it), None where no tracker has that id."""
+        if self.people is not None:
+            return next((t.tracker.body for t in self.people.tracks if t.id == body_id), None)
+        if self.tracker is not None and self.tracker.body_id == body_id:
+            return self.tracker.body
+        return None
 
     def detect(self, frame: Frame) -> Detection:
         """2D joints of ``frame``: of each person the depth shows (``max_people`` > 1), else of

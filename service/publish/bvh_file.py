@@ -10,7 +10,9 @@ count rewritten in place, so the file is a complete BVH after every frame.
 
 from __future__ import annotations
 
+import os
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +33,13 @@ FRAMES_WIDTH = 10
 """Digits reserved for the ``Frames:`` count, rewritten in place after every frame."""
 UPRIGHT = (0.0, 1.0, 0.0, 0.0)
 """Root quaternion of a body upright facing the camera (upright, facing +Z, in the BVH)."""
+KEPT_POSES = 3000
+"""Rows whose poses a BVH file that may still change its body keeps (``--personalize`` locks a
+shape within its first 3..300 tracked frames): a new body rewrites those rows from the poses,
+later ones are kept as written."""
+
+BodyOf = Callable[[int], SkinnedBody | None]
+"""The body a body id is tracked with now (None: none tracks that id)."""
 
 
 def depth_first(parents: np.ndarray) -> list[int]:
@@ -87,20 +96,60 @@ class BvhSink(FileSink):
 
     what = "the BVH file"
 
-    def __init__(self, path: str | Path, body: SkinnedBody, fps: float = 30.0, body_id: int = 0) -> None:
+    def __init__(self, path: str | Path, body: SkinnedBody, fps: float = 30.0, body_id: int = 0,
+                 may_change: bool = False) -> None:
         if not (np.isfinite(fps) and fps > 0):
             raise OutputError(f"BVH file {path}: fps must be positive, got {fps}")
         self.body_id = _check_id(body_id, f"BVH file {path}")
         super().__init__(path, "wb")
+        self.fps = fps
         self.body = body
         self.rig = body.rig
         self.order = depth_first(self.rig.parents)
         self._last: str | None = None
+        self._poses: list[tuple[np.ndarray | None, np.ndarray]] | None = [] if may_change else None
         try:
             self._file.write(self._header(fps).encode("ascii"))
         except OSError as exc:
             raise write_error(self.what, self.path, exc) from exc
         self._flush()
+
+    def use_body(self, body: SkinnedBody) -> bool:
+        """Animate ``body`` from now on, and the rows already written too: another shape of the
+        same rig (the body ``--personalize`` locks). The file is rewritten with ``body``'s
+        skeleton and, for the first :data:`KEPT_POSES` rows, their poses on it (later rows as
+        written), then replaces the old one at once. Returns whether anything changed; a rig
+        with other bones is refused (OutputError)."""
+        self._check_open()
+        if body is self.body or (body.rig.heads.shape == self.rig.heads.shape
+                                 and np.array_equal(body.rig.heads, self.rig.heads)):
+            self.body = body
+            return False
+        if not np.array_equal(body.rig.parents, self.rig.parents):
+            raise OutputError(f"BVH file {self.path}: body {body.name} has other bones than {self.body.name}; "
+                              "a BVH file animates one skeleton")
+        rows = self._written_rows()
+        self.body, self.rig = body, body.rig
+        if self._poses is not None:
+            self._last = None
+            for k, (pose, to_bvh) in enumerate(self._poses):
+                rows[k] = self._last = self._pose_row(pose, to_bvh)
+            self._poses = None  # the body is final now: nothing more to keep
+        temporary = self.path.with_name(self.path.name + ".tmp")
+        try:
+            with open(temporary, "wb") as out:
+                head = self._header(self.fps)
+                out.write(head.replace(f"Frames: {0:<{FRAMES_WIDTH}d}", f"Frames: {len(rows):<{FRAMES_WIDTH}d}")
+                          .encode("ascii"))
+                out.write("".join(row + "\n" for row in rows).encode("ascii"))
+            self._file.close()
+            os.replace(temporary, self.path)
+            self._file = open(self.path, "r+b")
+            self._file.seek(0, 2)
+        except OSError as exc:
+            raise write_error(self.what, self.path, exc) from exc
+        self._last = rows[-1] if rows else None
+        return True
 
     def _header(self, fps: float) -> str:
         parents, heads = self.rig.parents, self.rig.heads * BVH_UNITS_PER_M
@@ -167,9 +216,34 @@ class BvhSink(FileSink):
         to_bvh = bvh_transform(message)
         if pose is not None:
             try:
-                return _numbers(self.channels(np.asarray(pose, dtype=np.float64), to_bvh))
+                pose = np.asarray(pose, dtype=np.float64)
+                row = _numbers(self.channels(pose, to_bvh))
             except (ShapeError, ValueError):  # a malformed pose counts as none
-                pass
+                pose = None
+            else:
+                self._keep(pose, to_bvh)
+                return row
+        self._keep(None, to_bvh)
+        return self._pose_row(None, to_bvh)
+
+    def _written_rows(self) -> list[str]:
+        """The MOTION rows written so far, read back from the file."""
+        self._flush()
+        try:
+            text = self.path.read_bytes().decode("ascii")
+        except OSError as exc:
+            raise write_error(self.what, self.path, exc) from exc
+        return text.split("\nFrame Time:", 1)[1].split("\n")[1:-1] if self.frames else []
+
+    def _keep(self, pose: np.ndarray | None, to_bvh: np.ndarray) -> None:
+        """Remember the pose of the row being written while the body may still change."""
+        if self._poses is not None and len(self._poses) < KEPT_POSES:
+            self._poses.append((pose, to_bvh))
+
+    def _pose_row(self, pose: np.ndarray | None, to_bvh: np.ndarray) -> str:
+        """The row of ``pose`` (None: no pose in that frame: the last row, or before any the rest pose)."""
+        if pose is not None:
+            return _numbers(self.channels(pose, to_bvh))
         if self._last is None:
             if np.array_equal(to_bvh, bvh_transform(None)):
                 rest = self.body.rest_pose(quaternion=UPRIGHT)
@@ -212,7 +286,9 @@ def bvh_transform(message: dict | None) -> np.ndarray:
 
 
 class PerIdBvhSink:
-    """One :class:`BvhSink` per body id in folder ``out_dir``, all animating ``body`` at ``fps``.
+    """One :class:`BvhSink` per body id in folder ``out_dir``, all animating ``body`` at ``fps``;
+    with ``body_of`` (``--personalize``), each id's file animates the body that id is tracked
+    with, and is rewritten with the new skeleton when that body changes (its shape locked).
 
     Id 0's file, ``poses.bvh``, is created at once and has a row for every frame message (as
     a run of one person always had); id N's, ``poses_id<N>.bvh``, is created by the first
@@ -225,13 +301,19 @@ class PerIdBvhSink:
 
     what = "the BVH files"
 
-    def __init__(self, out_dir: str | Path, body: SkinnedBody, fps: float = 30.0) -> None:
+    def __init__(self, out_dir: str | Path, body: SkinnedBody, fps: float = 30.0, body_of: BodyOf | None = None
+                 ) -> None:
         self.out_dir = Path(out_dir)
         self.body = body
         self.fps = fps
+        self.body_of = body_of
         self.frames = 0
         self._closed = False
-        self.sinks: dict[int, BvhSink] = {0: BvhSink(bvh_path(self.out_dir, 0), body, fps, body_id=0)}
+        self.sinks: dict[int, BvhSink] = {0: self._open(0)}
+
+    def _open(self, body_id: int) -> BvhSink:
+        body = (self.body_of(body_id) if self.body_of is not None else None) or self.body
+        return BvhSink(bvh_path(self.out_dir, body_id), body, self.fps, body_id, may_change=self.body_of is not None)
 
     @property
     def path(self) -> Path:
@@ -250,8 +332,11 @@ class PerIdBvhSink:
         for body in message.get("bodies") or []:
             body_id = _check_id(body.get("id"), f"frame {message.get('frame', '?')}")
             if body_id not in self.sinks:
-                self.sinks[body_id] = BvhSink(bvh_path(self.out_dir, body_id), self.body, self.fps, body_id)
-        for sink in self.sinks.values():
+                self.sinks[body_id] = self._open(body_id)
+        for body_id, sink in self.sinks.items():
+            body = self.body_of(body_id) if self.body_of is not None else None
+            if body is not None:
+                sink.use_body(body)
             sink.frame(message, frame)
         self.frames += 1
 

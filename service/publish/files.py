@@ -29,7 +29,7 @@ from swarmpose.body.skeleton import EVAL_JOINTS, POSE_DIM
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.errors import OutputError
 from swarmpose.messages import POSE_NAMES, encode
-from swarmpose.publish.bvh_file import PerIdBvhSink
+from swarmpose.publish.bvh_file import BodyOf, PerIdBvhSink
 from swarmpose.publish.file_sink import FileSink, write_error
 from swarmpose.publish.overlay import OverlaySink
 from swarmpose.publish.sink import Sink
@@ -116,10 +116,12 @@ class CsvSink(FileSink):
         self.frames += 1
 
 
-def open_recording(out_dir: str | Path, body: SkinnedBody, fps: float = 30.0, overlay: bool = True) -> list[Sink]:
+def open_recording(out_dir: str | Path, body: SkinnedBody, fps: float = 30.0, overlay: bool = True,
+                   body_of: BodyOf | None = None) -> list[Sink]:
     """The replay sinks of folder ``out_dir`` (created if needed): poses.jsonl, poses.csv,
     the BVH files (:class:`PerIdBvhSink`: poses.bvh for id 0, poses_id<N>.bvh for id N,
-    animating ``body`` at ``fps``) and, with ``overlay``, overlay.mp4."""
+    animating ``body`` at ``fps``, or with ``body_of`` each id's current body) and, with
+    ``overlay``, overlay.mp4."""
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -127,7 +129,7 @@ def open_recording(out_dir: str | Path, body: SkinnedBody, fps: float = 30.0, ov
         raise OutputError(f"cannot create the output folder {out}: {exc.strerror or exc}; "
                           "choose a writable output folder (or remove the file in its way)") from exc
     makers = [lambda: JsonlSink(out / "poses.jsonl"), lambda: CsvSink(out / "poses.csv"),
-              lambda: PerIdBvhSink(out, body, fps)]
+              lambda: PerIdBvhSink(out, body, fps, body_of)]
     if overlay:
         makers.append(lambda: OverlaySink(out / "overlay.mp4", fps))
     sinks: list[Sink] = []

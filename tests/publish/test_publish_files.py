@@ -12,6 +12,7 @@ from __future__ import annotations
 import csv
 import json
 import re
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -220,6 +221,75 @@ def test_bvh_of_random_poses_with_gimbal_lock(tmp_path, builtin_body):
     bvh_root = Rotation.from_euler("ZXY", [30, 90, -20], degrees=True).as_matrix()
     poses[0, 3:7] = matrix_to_quaternion(np.diag([1.0, -1.0, -1.0]) @ bvh_root)
     write_and_check(tmp_path, builtin_body, poses, fps=25.0)
+
+
+@pytest.mark.parametrize("spec, first, then", [
+    ("builtin", "default", "height=1.9"),
+    pytest.param(f"makehuman:{MAKEHUMAN}", "male", "female-short", marks=needs_assets),  # rest frames differ
+])
+def test_bvh_rewritten_for_a_new_body_animates_it_from_the_first_frame(tmp_path, spec, first, then):
+    """A BVH file whose body may change (--personalize) and then changes: the file holds the
+    new body's skeleton and every row, those written before the change too, places the new
+    rig's joints where the numpy FK of the same poses on it does (both readers); a frame
+    without a pose before the change repeats the new rig's row; a rig with other bones is
+    refused. (MakeHuman shapes differ in their bones' rest frames, so the rows written before
+    the change must be recomputed, not only the header.)"""
+    start, tall = load_body(spec, first), load_body(spec, then)
+    poses = camera_poses(start, "walk", 9)
+    path = tmp_path / "poses.bvh"
+    sink = BvhSink(path, start, may_change=True)
+    want = []
+    _, on_tall = forward_kinematics(tall.rig, poses)
+    for k, h in enumerate(poses):
+        if k == 5:
+            assert sink.use_body(tall) and not sink.use_body(tall)  # the second time changes nothing
+        sink.frame(message(k, [entry(k, h)]), None)
+        want.append(on_tall[k] * TO_BVH)
+        if k == 2:  # no pose: the row repeats the last one
+            sink.frame(message(k, [], "no person"), None)
+            want.append(on_tall[k] * TO_BVH)
+    with pytest.raises(OutputError, match="other bones"):
+        sink.use_body(_renamed_rig(start))
+    sink.close()
+    want = np.array(want)
+    clip = read_bvh(path)
+    assert len(clip) == len(want) == sink.frames
+    for b, parent in enumerate(tall.rig.parents):  # the offsets are the tall rig's bones
+        if parent >= 0:
+            np.testing.assert_allclose(clip.offsets[clip.joint_index(tall.bone_names[b])],
+                                       100.0 * (tall.rig.heads[b] - tall.rig.heads[parent]), atol=1e-4)
+    np.testing.assert_allclose(own_positions(path, tall.bone_names), want, atol=1e-3)
+    np.testing.assert_allclose(bvhio_positions(path, tall.bone_names, len(want)), want, atol=1e-3)
+    assert not path.with_name("poses.bvh.tmp").exists()
+
+
+def _renamed_rig(body) -> SimpleNamespace:
+    """What use_body reads of a body whose last bone hangs from the root: another skeleton of
+    as many bones."""
+    parents = body.rig.parents.copy()
+    parents[-1] = 0
+    return SimpleNamespace(name="re-parented", rig=SimpleNamespace(parents=parents, heads=body.rig.heads + 0.01))
+
+
+def test_per_id_bvh_files_follow_each_ids_current_body(tmp_path, builtin_body):
+    """PerIdBvhSink with body_of: each id's file starts with that id's body and is rewritten
+    when it changes; without body_of nothing is kept to rewrite."""
+    tall = load_body("builtin", "height=1.9")
+    current = {0: builtin_body, 3: tall}
+    sink = PerIdBvhSink(tmp_path, builtin_body, body_of=current.get)
+    pose = camera_poses(builtin_body, "walk", 1)[0]
+    sink.frame(message(0, [entry(0, pose), entry(1, pose, body_id=3)]), None)
+    current[0] = tall
+    sink.frame(message(1, [entry(2, pose), entry(3, pose, body_id=3)]), None)
+    sink.close()
+    _, heads = forward_kinematics(tall.rig, pose[None])
+    for name in ("poses.bvh", "poses_id3.bvh"):
+        np.testing.assert_allclose(own_positions(tmp_path / name, tall.bone_names),
+                                   np.repeat(heads * TO_BVH, 2, axis=0), atol=1e-3)
+    (tmp_path / "plain").mkdir()
+    plain = PerIdBvhSink(tmp_path / "plain", builtin_body)
+    assert plain.sinks[0]._poses is None
+    plain.close()
 
 
 def test_bvh_rest_pose_before_any_pose_stands_upright(tmp_path, builtin_body):

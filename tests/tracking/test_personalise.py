@@ -130,6 +130,49 @@ def test_personalize_n_locks_each_bodys_shape_online_and_status_and_info_say_so(
     assert len(sink.frames) == 16 and all(m["bodies"] for m in sink.frames)
 
 
+@needs_assets
+def test_personalize_n_writes_the_bvh_of_the_locked_body(tall_walk, tmp_path):
+    """`--personalize 10 --out DIR`: poses.bvh animates the fitted body, not the start body:
+    its offsets are the locked rig's bones and a row written before the lock places the
+    joints (read back with the third-party bvhio) where the numpy FK of that frame's pose on the
+    locked rig does."""
+    from contextlib import ExitStack
+
+    import bvhio
+
+    from swarmpose.body.kinematics import forward_kinematics
+    from swarmpose.motion.bvh import read_bvh
+    from swarmpose.pipeline.config import ServiceConfig
+    from swarmpose.pipeline.run import run_sequence
+    from swarmpose.pipeline.service import open_parts
+    from swarmpose.publish.bvh_file import bvh_transform
+    from swarmpose.tracking.config import TrackerConfig
+
+    config = ServiceConfig(source=f"folder:{tall_walk}", body=f"makehuman:{MAKEHUMAN}", overlay=False,
+                           tracker=TrackerConfig(personalize=10, particles=16, generations=16, max_people=1))
+    with ExitStack() as stack:
+        parts = open_parts(config, stack, out=str(tmp_path))
+        start = parts.body
+        run_sequence(parts.source, parts.pipeline, parts.sinks, frames=12, progress=False)
+        locked = parts.pipeline.tracker.body
+    assert parts.pipeline.tracker.personalisation()["state"] == "locked"
+    assert abs(locked.height - start.height) > 0.05  # a 1.93 m subject, a 1.68 m start body
+    clip = read_bvh(tmp_path / "poses.bvh")
+    names, parents, heads = locked.bone_names, locked.rig.parents, locked.rig.heads
+    assert len(clip) == 12
+    for b in range(1, len(names)):
+        np.testing.assert_allclose(clip.offsets[clip.joint_index(names[b])], 100.0 * (heads[b] - heads[parents[b]]),
+                                   atol=1e-4, err_msg=names[b])
+    root = bvhio.readAsHierarchy(str(tmp_path / "poses.bvh"))
+    joints = {joint.Name: joint for joint, _, _ in root.layout()}
+    first = json.loads((tmp_path / "poses.jsonl").read_text().splitlines()[0])
+    _, expected = forward_kinematics(locked.rig, np.array([first["bodies"][0]["pose"]]))
+    to_bvh = bvh_transform(first)
+    root.loadPose(0)
+    got = np.array([list(joints[n].PositionWorld) for n in names])
+    np.testing.assert_allclose(got, 100.0 * (expected[0] @ to_bvh[:3, :3].T + to_bvh[:3, 3]), atol=0.05)
+
+
 def test_personalize_fits_the_builtin_bodys_height_and_girths(tmp_path, capsys):
     """A built-in male-heavy subject (1.78 m, torso girth 1.35, arms and legs 1.25) from the
     average built-in body (1.75 m, girths 1.0): height within 4 cm and every girth found
