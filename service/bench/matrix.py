@@ -12,7 +12,8 @@ every detector and every motion meets three yaws:
 * each cell in every mode of :data:`MODES`.
 
 ``subset="regression"`` is the small set ``make test`` runs: the walk seen from the side
-(90°) and from behind (180°), MoveNet.
+(90°) and from behind (180°), and jumping jacks from behind on the heavy male (the cell whose
+start locked into the mirrored facing when MoveNet swapped sides on its first frame), MoveNet.
 """
 
 from __future__ import annotations
@@ -85,7 +86,8 @@ def sequences(subset: str = "full") -> list[Sequence]:
         raise ConfigError(f"unknown benchmark subset {subset!r}; choose one of {', '.join(SUBSETS)}")
     if subset == "regression":
         height, distance = PLACEMENTS[0]
-        return [Sequence("walk", "male", yaw, height, distance) for yaw in (90, 180)]
+        return ([Sequence("walk", "male", yaw, height, distance) for yaw in (90, 180)]
+                + [Sequence("jumping-jacks", "male-heavy", 180, height, distance)])
     motions = list(MOTIONS)
     out = []
     for i, yaw in enumerate(YAWS):

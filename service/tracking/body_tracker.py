@@ -49,6 +49,25 @@ from swarmpose.tracking.result import BodyResult, lost_body
 
 HISTORY = 5
 """Previous solutions injected as particles."""
+REPLACED_TURN_DEG = 90.0
+"""A frame's solution turned this far (root rotation, degrees) from the last one replaced the
+track (a re-check's or the start's other facing won): no body turns that far in one frame, so
+the poses before it are dropped from :data:`HISTORY`. Kept as seeds, they won back a mirrored
+back view on the next frame whose detection swapped sides (BENCHMARKS.md, issue 12)."""
+
+
+YOUNG_RECHECKS = (1, 2, 4)
+"""Track ages (frames after the start) at which the start's facings are refitted too, besides
+every ``config.recheck`` frames: the start's pick rests on one frame's detection, and a
+detector that swapped sides on that frame (people seen from behind) locked the track in the
+mirrored facing until the next re-check (BENCHMARKS.md, issue 12)."""
+
+
+def root_turn_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """The angle (degrees) of the rotation between the root orientations of poses a and b (36,)
+    (unit or not: the quaternions are normalised)."""
+    qa, qb = a[3:7] / np.linalg.norm(a[3:7]), b[3:7] / np.linalg.norm(b[3:7])
+    return float(np.degrees(2.0 * np.arccos(np.clip(abs(float(qa @ qb)), 0.0, 1.0))))
 
 
 def observed_depth(depth: np.ndarray) -> np.ndarray:
@@ -88,6 +107,8 @@ class BodyTracker:
             self.objective = Objective(self.body, intrinsics, scorer, self.weights, self._coarse_scorer(context))
         self.history: list[np.ndarray] = []
         self.previous: np.ndarray | None = None
+        self.age = 0
+        """Frames tracked since the track's start (0 on the start's frame)."""
         self.filter = (PoseFilter(config.smoothing_cutoff_hz, config.smoothing_beta)
                        if config.smoothing == "one-euro" else None)
         """The published poses' filter (``--smoothing one-euro``); the search never sees its output."""
@@ -130,6 +151,7 @@ class BodyTracker:
         """Forget the track: the next frame initialises from its detection."""
         self.history.clear()
         self.previous = None
+        self.age = 0
         if self.filter is not None:
             self.filter.reset()
 
@@ -209,6 +231,9 @@ class BodyTracker:
         if out_state == "lost":
             self.reset()
         else:
+            if self.previous is not None and root_turn_deg(self.previous, best) > REPLACED_TURN_DEG:
+                self.history.clear()  # the old track's poses are no seeds for the new one
+            self.age = 0 if self.previous is None else self.age + 1
             self.previous = best
             self.history.append(best)
             del self.history[:-HISTORY]
@@ -297,11 +322,13 @@ class BodyTracker:
 
     def _recheck(self, index: int, lifted: dict[str, np.ndarray], targets: JointTargets, depth: np.ndarray,
                  rng: np.random.Generator, timings: dict[str, float]) -> list[np.ndarray]:
-        """Every ``config.recheck`` frames, the start's facings refitted from the detection on a
-        quarter of the budget: they join the swarm as particles, so a track locked in a wrong
-        facing or limb configuration is replaced as soon as they explain the frame better."""
+        """Every ``config.recheck`` frames and on a young track's :data:`YOUNG_RECHECKS` frames,
+        the start's facings refitted from the detection on a quarter of the budget: they join the
+        swarm as particles, so a track locked in a wrong facing or limb configuration is
+        replaced as soon as they explain the frame better."""
         every = self.config.recheck
-        if not every or index % every or targets.count == 0:
+        due = bool(every) and (index % every == 0 or self.age + 1 in YOUNG_RECHECKS)  # this frame's age
+        if not due or targets.count == 0:
             return []
         centre = torso_pose(self.body, lifted, self.body.rest_angles)
         if centre is None:

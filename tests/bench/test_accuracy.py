@@ -1,8 +1,11 @@
 """The accuracy benchmark's regression subset: the MakeHuman walk seen from the side and from
-behind, MoveNet (the real network) on the rendered colour, scored against the ground truth.
+behind and jumping jacks from behind, MoveNet (the real network) on the rendered colour, scored
+against the ground truth.
 
 Before the start tried several facings, hybrid locked into a mirrored pose on the side view
-(Δ 219 mm, torso facing 151° off); these bounds keep that from coming back.
+(Δ 219 mm, torso facing 151° off); before young tracks re-checked their facing, the jumping
+jacks stayed mirrored for 20 frames after MoveNet swapped sides on the first (294 mm, 30 % of
+frames facing right). These bounds keep both from coming back.
 """
 
 from __future__ import annotations
@@ -18,9 +21,13 @@ from swarmpose.cli.main import main
 
 SETTINGS = {"particles": 32, "generations": 32}
 FRAMES = 20
-BOUND_MM = {90: 90.0, 180: 60.0}
-"""Hybrid Δ bound per yaw (measured 71 and 47 mm at p = g = 32, 20 frames; 85 and 48 mm before
-the two-stage start and the penetration term, 215 and 45 mm with a start that did not converge)."""
+BOUND_MM = {("walk", 90): 90.0, ("walk", 180): 60.0, ("jumping-jacks", 180): 100.0}
+"""Hybrid Δ bound per motion and yaw (the walk: measured 71 and 47 mm at p = g = 32, 20 frames;
+85 and 48 mm before the two-stage start and the penetration term, 215 and 45 mm with a start
+that did not converge; the jumping jacks: see the module doc and BENCHMARKS.md)."""
+FACING_OK = {("walk", 90): 0.9, ("walk", 180): 0.9, ("jumping-jacks", 180): 0.8}
+"""Share of hybrid frames with the torso facing within 30°: the jumping jacks' first frame
+(and at p = g = 32 its second) is mirrored until the re-check of the young track replaces it."""
 
 
 @pytest.fixture(scope="module")
@@ -34,13 +41,13 @@ def regression(tmp_path_factory):
 @needs_assets
 def test_side_and_back_views_with_movenet_hold(regression):
     _, records = regression
-    by = {(r["yaw_deg"], r["mode"]): r for r in records}
-    assert sorted(by) == [(90, "hybrid"), (90, "joints"), (180, "hybrid"), (180, "joints")]
-    for yaw, bound in BOUND_MM.items():
-        hybrid, joints = by[yaw, "hybrid"], by[yaw, "joints"]
+    by = {(r["motion"], r["yaw_deg"], r["mode"]): r for r in records}
+    assert sorted(by) == sorted((*cell, mode) for cell in BOUND_MM for mode in ("hybrid", "joints"))
+    for (motion, yaw), bound in BOUND_MM.items():
+        hybrid, joints = by[motion, yaw, "hybrid"], by[motion, yaw, "joints"]
         assert hybrid["frames"] == FRAMES and hybrid["detector"] == "movenet"
         assert hybrid["mpjpe_mm"] <= bound, hybrid
-        assert hybrid["facing_ok"] >= 0.9, f"torso facing within 30° on too few frames: {hybrid}"
+        assert hybrid["facing_ok"] >= FACING_OK[motion, yaw], f"torso facing within 30° on too few frames: {hybrid}"
         assert hybrid["lost"] == 0
         assert hybrid["mpjpe_mm"] < 0.65 * joints["mpjpe_mm"], (hybrid, joints)
         assert hybrid["detector_px"] < 15, "MoveNet on the rendered colour finds the limbs within a few pixels"

@@ -150,3 +150,20 @@ def test_coarse_to_fine_tracks_and_ends_at_full_resolution(body, sequence):
     assert not tracker.objective.coarse_active
     tracker.objective(result.pose[None])  # scored again at full resolution: the same E_D
     assert tracker.objective.last_parts["E_D"][0] == pytest.approx(result.objective["E_D"], rel=1e-6)
+
+
+def test_root_turn_is_the_angle_between_root_orientations():
+    """By hand: quarter and half turns about the vertical, the quaternion's sign and scale do not
+    matter, and a track replaced by its mirror (180°) counts as a turn past REPLACED_TURN_DEG."""
+    from swarmpose.tracking.body_tracker import REPLACED_TURN_DEG, root_turn_deg
+
+    def about_y(deg: float, scale: float = 1.0) -> np.ndarray:
+        pose = np.zeros(36)
+        half = np.radians(deg) / 2
+        pose[3:7] = scale * np.array([np.cos(half), 0.0, np.sin(half), 0.0])  # (w, x, y, z)
+        return pose
+
+    assert root_turn_deg(about_y(0), about_y(30)) == pytest.approx(30.0)
+    assert root_turn_deg(about_y(10), about_y(100, scale=-2.0)) == pytest.approx(90.0)
+    mirrored = root_turn_deg(about_y(-20), about_y(160))
+    assert mirrored == pytest.approx(180.0) and mirrored > REPLACED_TURN_DEG
