@@ -50,10 +50,13 @@ from swarmpose.tracking.result import BodyResult, lost_body
 HISTORY = 5
 """Previous solutions injected as particles."""
 REPLACED_TURN_DEG = 90.0
-"""A frame's solution turned this far (root rotation, degrees) from the last one replaced the
-track (a re-check's or the start's other facing won): no body turns that far in one frame, so
-the poses before it are dropped from :data:`HISTORY`. Kept as seeds, they won back a mirrored
-back view on the next frame whose detection swapped sides (BENCHMARKS.md, issue 12)."""
+"""A frame's solution turned this far (root rotation, degrees) from the last frame's is a
+challenger to the track (a re-check's or the start's other facing won): no body turns that far
+in one frame. It replaces the track only when it wins two frames running (the frame between
+publishes the best solution of the track's own facing), and then the old track's poses are
+dropped from :data:`HISTORY`. One frame's detection that swapped sides (people seen from
+behind) flipped tracks either way: kept as seeds, the old poses won back a mirrored facing;
+accepted at once, a mirrored re-check replaced a right track (BENCHMARKS.md, issue 12)."""
 
 
 YOUNG_RECHECKS = (1, 2, 4)
@@ -109,6 +112,8 @@ class BodyTracker:
         self.previous: np.ndarray | None = None
         self.age = 0
         """Frames tracked since the track's start (0 on the start's frame)."""
+        self.challenger: np.ndarray | None = None
+        """Last frame's winning solution turned away from the track (see :data:`REPLACED_TURN_DEG`)."""
         self.filter = (PoseFilter(config.smoothing_cutoff_hz, config.smoothing_beta)
                        if config.smoothing == "one-euro" else None)
         """The published poses' filter (``--smoothing one-euro``); the search never sees its output."""
@@ -152,6 +157,7 @@ class BodyTracker:
         self.history.clear()
         self.previous = None
         self.age = 0
+        self.challenger = None
         if self.filter is not None:
             self.filter.reset()
 
@@ -211,7 +217,8 @@ class BodyTracker:
             offset = np.abs(torso[:3] - centre[:3]) if torso is not None else np.zeros(3)
             radius = search.angle_radius(self.body, self.intrinsics, centre, targets)
             start = search.spread(centre, pso.particles, rng, 0.04 + offset, 0.15, radius)
-            seeds = [centre] + self.history[-HISTORY:][::-1] + ([torso] if torso is not None else []) + recheck
+            seeds = ([centre] + self.history[-HISTORY:][::-1] + ([torso] if torso is not None else []) + recheck
+                     + ([self.challenger] if self.challenger is not None else []))
         for i, s in enumerate(seeds[:pso.particles]):
             start[i] = s
 
@@ -221,7 +228,7 @@ class BodyTracker:
         result = self._search(self.objective, start, rng, pso)
         timings["pso"] = 1000 * (time.perf_counter() - t1)
         timings.update(search_split(self.objective.take_spent(), timings["pso"]))
-        best = result.best
+        best = result.best if state == "init" else self._hold_facing(result)
         self.objective(best[None])
         parts = {k: float(v[0]) for k, v in self.objective.last_parts.items()}
         tile, counts = self._render(best)
@@ -231,8 +238,6 @@ class BodyTracker:
         if out_state == "lost":
             self.reset()
         else:
-            if self.previous is not None and root_turn_deg(self.previous, best) > REPLACED_TURN_DEG:
-                self.history.clear()  # the old track's poses are no seeds for the new one
             self.age = 0 if self.previous is None else self.age + 1
             self.previous = best
             self.history.append(best)
@@ -245,6 +250,24 @@ class BodyTracker:
         if self.filter is None or out_state == "lost":
             return result
         return self._filtered(result, frame.timestamp_ns * 1e-9)
+
+    def _hold_facing(self, result: PsoResult) -> np.ndarray:
+        """The frame's solution from the search's ``result``: its best, unless that is turned
+        away from the track (:data:`REPLACED_TURN_DEG`) for the first frame running; then the
+        best particle of the track's own facing, and the best is kept as the challenger that
+        joins the next frame's swarm. A challenger that wins again replaces the track."""
+        best = result.best
+        if root_turn_deg(self.previous, best) <= REPLACED_TURN_DEG:
+            self.challenger = None
+            return best
+        own = [k for k, pose in enumerate(result.personal_bests)
+               if root_turn_deg(self.previous, pose) <= REPLACED_TURN_DEG]
+        if self.challenger is not None or not own:  # it won twice (or nothing is left of the track)
+            self.challenger = None
+            self.history.clear()  # the old track's poses are no seeds for the new one
+            return best
+        self.challenger = best
+        return result.personal_bests[min(own, key=lambda k: result.personal_values[k])].copy()
 
     def _filtered(self, result: BodyResult, time_s: float) -> BodyResult:
         """``result`` with its pose through :attr:`filter` and the joints of that pose; the search's own

@@ -70,12 +70,16 @@ class PsoConfig:
 @dataclass(frozen=True)
 class PsoResult:
     """best: (D,) position; value: its objective; history: (G + 1,) best value after
-    initialisation and after each generation; evaluations: objective evaluations made."""
+    initialisation and after each generation; evaluations: objective evaluations made;
+    personal_bests (P, D) and personal_values (P,): every particle's best position and value
+    at the end (the best among them is ``best``)."""
 
     best: np.ndarray
     value: float
     history: np.ndarray
     evaluations: int
+    personal_bests: np.ndarray | None = None
+    personal_values: np.ndarray | None = None
 
 
 def _step_within(x: np.ndarray, v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -140,4 +144,4 @@ def minimise(objective: Callable[[np.ndarray], np.ndarray], start: np.ndarray, l
         pbest[better], pbest_val[better] = x[better], values[better]
         g = int(np.argmin(pbest_val))
         history.append(pbest_val[g])
-    return PsoResult(pbest[g].copy(), float(pbest_val[g]), np.array(history), evaluations)
+    return PsoResult(pbest[g].copy(), float(pbest_val[g]), np.array(history), evaluations, pbest, pbest_val)

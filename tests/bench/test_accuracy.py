@@ -5,7 +5,7 @@ against the ground truth.
 Before the start tried several facings, hybrid locked into a mirrored pose on the side view
 (Δ 219 mm, torso facing 151° off); before young tracks re-checked their facing, the jumping
 jacks stayed mirrored for 20 frames after MoveNet swapped sides on the first (294 mm, 30 % of
-frames facing right). These bounds keep both from coming back.
+frames facing right; 55 mm and 90 % now). These bounds keep both from coming back.
 """
 
 from __future__ import annotations
@@ -25,6 +25,8 @@ BOUND_MM = {("walk", 90): 90.0, ("walk", 180): 60.0, ("jumping-jacks", 180): 100
 """Hybrid Δ bound per motion and yaw (the walk: measured 71 and 47 mm at p = g = 32, 20 frames;
 85 and 48 mm before the two-stage start and the penetration term, 215 and 45 mm with a start
 that did not converge; the jumping jacks: see the module doc and BENCHMARKS.md)."""
+RATIO = {("walk", 90): 0.65, ("walk", 180): 0.65, ("jumping-jacks", 180): 0.75}
+"""Bound on hybrid Δ / joints-only Δ (measured 0.54, 0.55 and 0.61)."""
 FACING_OK = {("walk", 90): 0.9, ("walk", 180): 0.9, ("jumping-jacks", 180): 0.8}
 """Share of hybrid frames with the torso facing within 30°: the jumping jacks' first frame
 (and at p = g = 32 its second) is mirrored until the re-check of the young track replaces it."""
@@ -49,7 +51,7 @@ def test_side_and_back_views_with_movenet_hold(regression):
         assert hybrid["mpjpe_mm"] <= bound, hybrid
         assert hybrid["facing_ok"] >= FACING_OK[motion, yaw], f"torso facing within 30° on too few frames: {hybrid}"
         assert hybrid["lost"] == 0
-        assert hybrid["mpjpe_mm"] < 0.65 * joints["mpjpe_mm"], (hybrid, joints)
+        assert hybrid["mpjpe_mm"] < RATIO[motion, yaw] * joints["mpjpe_mm"], (hybrid, joints)
         assert hybrid["detector_px"] < 15, "MoveNet on the rendered colour finds the limbs within a few pixels"
 
 

@@ -127,3 +127,19 @@ def test_refine_switches_the_objective_once_and_rescores_the_personal_bests():
     assert calls == {"coarse": 32 * 20, "fine": 32 * 21 + 32}  # generations 20..40 and the rescoring
     assert result.evaluations == 32 * 41 + 32
     assert np.allclose(result.best, 0.0, atol=0.02) and result.value == pytest.approx(np.sum(result.best ** 2))
+
+
+def test_personal_bests_are_returned_with_their_values():
+    """Every particle's best position and value at the end: the values are the objective's at
+    those positions, and the result's best is the lowest of them."""
+    def sphere(x: np.ndarray) -> np.ndarray:
+        return np.sum((x - 0.3) ** 2, axis=1)
+
+    rng = np.random.default_rng(4)
+    start = rng.uniform(-1, 1, (12, 3))
+    result = minimise(sphere, start, np.full(3, -1.0), np.full(3, 1.0), rng, PsoConfig(particles=12, generations=15))
+    assert result.personal_bests.shape == (12, 3) and result.personal_values.shape == (12,)
+    np.testing.assert_allclose(result.personal_values, sphere(result.personal_bests))
+    k = int(np.argmin(result.personal_values))
+    np.testing.assert_array_equal(result.best, result.personal_bests[k])
+    assert result.value == result.personal_values[k]

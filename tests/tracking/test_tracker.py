@@ -167,3 +167,27 @@ def test_root_turn_is_the_angle_between_root_orientations():
     assert root_turn_deg(about_y(10), about_y(100, scale=-2.0)) == pytest.approx(90.0)
     mirrored = root_turn_deg(about_y(-20), about_y(160))
     assert mirrored == pytest.approx(180.0) and mirrored > REPLACED_TURN_DEG
+
+
+def test_a_turned_solution_replaces_the_track_only_when_it_wins_twice():
+    """_hold_facing by hand: a frame whose best is the mirrored facing publishes the best particle
+    of the track's own facing and keeps the mirror as the challenger; the mirror winning the next
+    frame too replaces the track and drops the old poses from the seeds; a frame the track's
+    facing wins clears the challenger."""
+    from swarmpose.tracking.pso import PsoResult
+
+    body = load_body("builtin", "default")
+    tracker = BodyTracker(body, Intrinsics.kinect_v1(), TrackerConfig(mode="lift"))
+    front, back = body.rest_pose((0.0, 0.0, 3.0), (0.0, 1.0, 0.0, 0.0)), body.rest_pose((0.0, 0.0, 3.0))
+    own = front.copy()
+    own[10] = 0.2  # another pose of the track's facing
+    mirrored_wins = PsoResult(back, 1.0, np.array([1.0]), 3, np.stack([back, own, back]), np.array([1.0, 2.0, 1.5]))
+    tracker.previous, tracker.history = front, [front]
+    np.testing.assert_array_equal(tracker._hold_facing(mirrored_wins), own)
+    assert tracker.challenger is back and tracker.history == [front]
+    np.testing.assert_array_equal(tracker._hold_facing(mirrored_wins), back)  # twice running: replaced
+    assert tracker.challenger is None and tracker.history == []
+    tracker.challenger = back
+    track_wins = PsoResult(own, 1.0, np.array([1.0]), 3, np.stack([own, back]), np.array([1.0, 1.5]))
+    np.testing.assert_array_equal(tracker._hold_facing(track_wins), own)
+    assert tracker.challenger is None
