@@ -10,9 +10,12 @@ count rewritten in place, so the file is a complete BVH after every frame.
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
 import warnings
 from collections.abc import Callable
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +28,8 @@ from swarmpose.core.world import check_rigid
 from swarmpose.publish.file_sink import FileSink, write_error
 from swarmpose.sources.base import Frame
 
+log = logging.getLogger(__name__)
+
 CAMERA_TO_BVH = np.diag([1.0, -1.0, -1.0])
 """Camera frame (y down, z forward) -> BVH world (Y up): 180 degrees about x; used where the
 floor is not known (a level camera's world frame)."""
@@ -33,13 +38,19 @@ FRAMES_WIDTH = 10
 """Digits reserved for the ``Frames:`` count, rewritten in place after every frame."""
 UPRIGHT = (0.0, 1.0, 0.0, 0.0)
 """Root quaternion of a body upright facing the camera (upright, facing +Z, in the BVH)."""
-KEPT_POSES = 3000
-"""Rows whose poses a BVH file that may still change its body keeps (``--personalize`` locks a
-shape within its first 3..300 tracked frames): a new body rewrites those rows from the poses,
-later ones are kept as written."""
+KEPT_POSES = 20_000
+"""Rows with a pose whose poses a BVH file that may still change its body keeps (``--personalize``
+locks a shape after 3..300 tracked frames; a person may come into view long after the file
+starts): a new body rewrites those rows from the poses (float32, 144 bytes each), rows after
+them stay as written."""
 
 BodyOf = Callable[[int], SkinnedBody | None]
 """The body a body id is tracked with now (None: none tracks that id)."""
+
+
+def same_rig(a, b) -> bool:
+    """Whether rig ``b`` equals the :class:`~swarmpose.body.kinematics.Rig` ``a`` array by array."""
+    return all(np.array_equal(getattr(a, f.name), getattr(b, f.name, None)) for f in fields(a))
 
 
 def depth_first(parents: np.ndarray) -> list[int]:
@@ -108,6 +119,7 @@ class BvhSink(FileSink):
         self.order = depth_first(self.rig.parents)
         self._last: str | None = None
         self._poses: list[tuple[np.ndarray | None, np.ndarray]] | None = [] if may_change else None
+        self._kept_posed = 0
         try:
             self._file.write(self._header(fps).encode("ascii"))
         except OSError as exc:
@@ -117,36 +129,49 @@ class BvhSink(FileSink):
     def use_body(self, body: SkinnedBody) -> bool:
         """Animate ``body`` from now on, and the rows already written too: another shape of the
         same rig (the body ``--personalize`` locks). The file is rewritten with ``body``'s
-        skeleton and, for the first :data:`KEPT_POSES` rows, their poses on it (later rows as
-        written), then replaces the old one at once. Returns whether anything changed; a rig
-        with other bones is refused (OutputError)."""
+        skeleton and the rows of the kept poses (:data:`KEPT_POSES`) recomputed on it (any
+        later ones as written, with a warning), then replaces the old one at once; a rewrite
+        that fails leaves the file and the sink as they were. Returns whether anything changed;
+        a rig with other bones is refused (OutputError)."""
         self._check_open()
-        if body is self.body or (body.rig.heads.shape == self.rig.heads.shape
-                                 and np.array_equal(body.rig.heads, self.rig.heads)):
-            self.body = body
+        if body is self.body or same_rig(self.rig, body.rig):
+            self.body, self.rig = body, body.rig
             return False
         if not np.array_equal(body.rig.parents, self.rig.parents):
             raise OutputError(f"BVH file {self.path}: body {body.name} has other bones than {self.body.name}; "
                               "a BVH file animates one skeleton")
-        rows = self._written_rows()
-        self.body, self.rig = body, body.rig
-        if self._poses is not None:
-            self._last = None
-            for k, (pose, to_bvh) in enumerate(self._poses):
-                rows[k] = self._last = self._pose_row(pose, to_bvh)
-            self._poses = None  # the body is final now: nothing more to keep
+        saved = (self.body, self.rig, self._last, self._poses, self._count_at)
         temporary = self.path.with_name(self.path.name + ".tmp")
         try:
+            rows = self._written_rows()
+            self.body, self.rig = body, body.rig
+            if self._poses is not None:
+                self._last = None
+                for k, (pose, to_bvh) in enumerate(self._poses):
+                    rows[k] = self._last = self._pose_row(pose, to_bvh)
+                if len(self._poses) < len(rows):
+                    log.warning("%s: the body changed after %d rows; the %d rows after the first %d keep their "
+                                "angles on the old skeleton", self.path, len(rows), len(rows) - len(self._poses),
+                                len(self._poses))
+            head = self._header(self.fps)
             with open(temporary, "wb") as out:
-                head = self._header(self.fps)
                 out.write(head.replace(f"Frames: {0:<{FRAMES_WIDTH}d}", f"Frames: {len(rows):<{FRAMES_WIDTH}d}")
                           .encode("ascii"))
                 out.write("".join(row + "\n" for row in rows).encode("ascii"))
-            self._file.close()
-            os.replace(temporary, self.path)
+            os.replace(temporary, self.path)  # the old file stays open until this succeeded
+        except OSError as exc:
+            self.body, self.rig, self._last, self._poses, self._count_at = saved
+            with contextlib.suppress(OSError):  # a partial temporary file, not what stood in its way
+                if temporary.is_file():
+                    temporary.unlink()
+            raise write_error(self.what, self.path, exc) from exc
+        old, self._poses = self._file, None  # the body is final now: nothing more to keep
+        try:
+            old.close()
             self._file = open(self.path, "r+b")
             self._file.seek(0, 2)
         except OSError as exc:
+            self._closed = True  # the new file is complete; this sink cannot append to it
             raise write_error(self.what, self.path, exc) from exc
         self._last = rows[-1] if rows else None
         return True
@@ -236,9 +261,14 @@ class BvhSink(FileSink):
         return text.split("\nFrame Time:", 1)[1].split("\n")[1:-1] if self.frames else []
 
     def _keep(self, pose: np.ndarray | None, to_bvh: np.ndarray) -> None:
-        """Remember the pose of the row being written while the body may still change."""
-        if self._poses is not None and len(self._poses) < KEPT_POSES:
-            self._poses.append((pose, to_bvh))
+        """Remember the pose of the row being written while the body may still change (rows
+        without a pose cost a reference each; up to :data:`KEPT_POSES` rows with one)."""
+        if self._poses is None or self._kept_posed >= KEPT_POSES:
+            return
+        if self._poses and np.array_equal(self._poses[-1][1], to_bvh):
+            to_bvh = self._poses[-1][1]  # the same transform, shared
+        self._poses.append((None if pose is None else pose.astype(np.float32), to_bvh))
+        self._kept_posed += pose is not None
 
     def _pose_row(self, pose: np.ndarray | None, to_bvh: np.ndarray) -> str:
         """The row of ``pose`` (None: no pose in that frame: the last row, or before any the rest pose)."""

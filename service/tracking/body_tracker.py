@@ -66,6 +66,12 @@ detector that swapped sides on that frame (people seen from behind) locked the t
 mirrored facing until the next re-check (BENCHMARKS.md, issue 12)."""
 
 
+def recheck_due(index: int, age: int, every: int) -> bool:
+    """Whether frame ``index`` of a track ``age`` frames old (1 = the first after its start)
+    re-checks the facings: every ``every`` frames and at :data:`YOUNG_RECHECKS` (0: never)."""
+    return bool(every) and (index % every == 0 or age in YOUNG_RECHECKS)
+
+
 def root_turn_deg(a: np.ndarray, b: np.ndarray) -> float:
     """The angle (degrees) of the rotation between the root orientations of poses a and b (36,)
     (unit or not: the quaternions are normalised)."""
@@ -217,8 +223,8 @@ class BodyTracker:
             offset = np.abs(torso[:3] - centre[:3]) if torso is not None else np.zeros(3)
             radius = search.angle_radius(self.body, self.intrinsics, centre, targets)
             start = search.spread(centre, pso.particles, rng, 0.04 + offset, 0.15, radius)
-            seeds = ([centre] + self.history[-HISTORY:][::-1] + ([torso] if torso is not None else []) + recheck
-                     + ([self.challenger] if self.challenger is not None else []))
+            seeds = ([centre] + ([self.challenger] if self.challenger is not None else [])
+                     + self.history[-HISTORY:][::-1] + ([torso] if torso is not None else []) + recheck)
         for i, s in enumerate(seeds[:pso.particles]):
             start[i] = s
 
@@ -255,14 +261,16 @@ class BodyTracker:
         """The frame's solution from the search's ``result``: its best, unless that is turned
         away from the track (:data:`REPLACED_TURN_DEG`) for the first frame running; then the
         best particle of the track's own facing, and the best is kept as the challenger that
-        joins the next frame's swarm. A challenger that wins again replaces the track."""
+        joins the next frame's swarm. A challenger that wins again (a best facing as it did)
+        replaces the track; another turned best becomes the challenger instead."""
         best = result.best
         if root_turn_deg(self.previous, best) <= REPLACED_TURN_DEG:
             self.challenger = None
             return best
         own = [k for k, pose in enumerate(result.personal_bests)
-               if root_turn_deg(self.previous, pose) <= REPLACED_TURN_DEG]
-        if self.challenger is not None or not own:  # it won twice (or nothing is left of the track)
+               if root_turn_deg(self.previous, pose) <= REPLACED_TURN_DEG and np.isfinite(result.personal_values[k])]
+        again = self.challenger is not None and root_turn_deg(self.challenger, best) <= REPLACED_TURN_DEG
+        if again or not own:  # the same challenger won twice (or nothing is left of the track)
             self.challenger = None
             self.history.clear()  # the old track's poses are no seeds for the new one
             return best
@@ -349,9 +357,7 @@ class BodyTracker:
         the start's facings refitted from the detection on a quarter of the budget: they join the
         swarm as particles, so a track locked in a wrong facing or limb configuration is
         replaced as soon as they explain the frame better."""
-        every = self.config.recheck
-        due = bool(every) and (index % every == 0 or self.age + 1 in YOUNG_RECHECKS)  # this frame's age
-        if not due or targets.count == 0:
+        if not recheck_due(index, self.age + 1, self.config.recheck) or targets.count == 0:  # this frame's age
             return []
         centre = torso_pose(self.body, lifted, self.body.rest_angles)
         if centre is None:

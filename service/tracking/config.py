@@ -46,8 +46,9 @@ class TrackerConfig:
     seed: int = setting(0, "PSO seed (a run repeats exactly with the same seed)", minimum=0)
     start_budget: int = setting(64, "the start's PSOs per facing run at least this many particles and generations "
                                     "(once per track)", minimum=1)
-    recheck: int = setting(10, "every this many frames, refit the start's facings from the detection and let them "
-                               "compete with the track (0 = off)", minimum=0)
+    recheck: int = setting(10, "every this many frames, and on a new track's 1st, 2nd and 4th, refit the start's "
+                               "facings from the detection and let them compete with the track (0 = off, both)",
+                           minimum=0)
     label_swaps: bool = setting(True, "a detected left/right pair may match the model's pair crossed, at a cost "
                                       "(detectors swap sides on people seen from behind)")
     penetration: float = setting(1.0, "w_P: cost per cm of an elbow or wrist inside the torso (0 = off)",

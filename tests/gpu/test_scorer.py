@@ -373,7 +373,7 @@ def test_vector_raster_is_bit_identical(body, seed):
     """The CPU layout's vector lanes (8 triangles set up at a time, rows 8 pixels at a time)
     draw exactly the z-buffer of the one-triangle-at-a-time path: on random poses, a box that
     cuts the body, poses crossing the near plane and behind the camera, with and without
-    back-face culling, at tile widths that fill 1 and 5 vector blocks a row."""
+    back-face culling, at tile widths of 1, 5 and 8 vector blocks a row."""
     rng = np.random.default_rng(seed + 5)
     h = np.concatenate([named_poses(body), random_poses(body, rng, 10)])
     odd = np.tile(h[:1], (3, 1))

@@ -263,6 +263,54 @@ def test_bvh_rewritten_for_a_new_body_animates_it_from_the_first_frame(tmp_path,
     assert not path.with_name("poses.bvh.tmp").exists()
 
 
+def test_a_failed_bvh_rewrite_leaves_the_file_and_the_sink_as_they_were(tmp_path, builtin_body):
+    """The temporary file cannot be written (a folder in its way): use_body raises OutputError,
+    the file, its skeleton and the sink's body are unchanged, rows go on; once the way is clear
+    the rewrite succeeds."""
+    tall = load_body("builtin", "height=1.9")
+    poses = camera_poses(builtin_body, "walk", 4)
+    path = tmp_path / "poses.bvh"
+    sink = BvhSink(path, builtin_body, may_change=True)
+    sink.frame(message(0, [entry(0, poses[0])]), None)
+    before = path.read_bytes()
+    blocker = tmp_path / "poses.bvh.tmp"
+    blocker.mkdir()
+    with pytest.raises(OutputError, match="poses.bvh"):
+        sink.use_body(tall)
+    assert path.read_bytes() == before and sink.body is builtin_body
+    sink.frame(message(1, [entry(1, poses[1])]), None)
+    blocker.rmdir()
+    assert sink.use_body(tall)
+    sink.frame(message(2, [entry(2, poses[2])]), None)
+    sink.close()
+    _, on_tall = forward_kinematics(tall.rig, poses[:3])
+    np.testing.assert_allclose(own_positions(path, tall.bone_names), on_tall * TO_BVH, atol=1e-3)
+    assert not blocker.exists()
+
+
+def test_bvh_rows_without_a_pose_do_not_use_up_the_kept_poses(tmp_path, builtin_body, monkeypatch, caplog):
+    """Only rows with a pose count towards KEPT_POSES (nobody in view for a long time before the
+    person comes does not use them up); rows beyond it keep their old values, with a warning."""
+    import swarmpose.publish.bvh_file as bvh_file
+
+    monkeypatch.setattr(bvh_file, "KEPT_POSES", 2)
+    tall = load_body("builtin", "height=1.9")
+    poses = camera_poses(builtin_body, "walk", 3)
+    path = tmp_path / "poses.bvh"
+    sink = BvhSink(path, builtin_body, may_change=True)
+    for k in range(5):
+        sink.frame(message(k, [], "no person"), None)
+    for k, h in enumerate(poses):
+        sink.frame(message(5 + k, [entry(k, h)]), None)
+    sink.use_body(tall)
+    sink.close()
+    assert "keep their angles on the old skeleton" in caplog.text
+    got = own_positions(path, tall.bone_names)
+    _, on_tall = forward_kinematics(tall.rig, poses)
+    np.testing.assert_allclose(got[5:7], on_tall[:2] * TO_BVH, atol=1e-3)  # the kept poses, recomputed
+    np.testing.assert_allclose(got[:5, 0], np.repeat(got[:1, 0], 5, axis=0))  # the rest pose, five times
+
+
 def _renamed_rig(body) -> SimpleNamespace:
     """What use_body reads of a body whose last bone hangs from the root: another skeleton of
     as many bones."""

@@ -191,3 +191,41 @@ def test_a_turned_solution_replaces_the_track_only_when_it_wins_twice():
     track_wins = PsoResult(own, 1.0, np.array([1.0]), 3, np.stack([own, back]), np.array([1.0, 1.5]))
     np.testing.assert_array_equal(tracker._hold_facing(track_wins), own)
     assert tracker.challenger is None
+
+
+def test_rechecks_are_due_every_n_frames_and_on_a_young_tracks_first_frames():
+    from swarmpose.tracking.body_tracker import recheck_due
+
+    due = [k for k in range(1, 31) if recheck_due(100 + k, k, 10)]
+    assert due == [1, 2, 4, 10, 20, 30]
+    assert not any(recheck_due(k, k, 0) for k in range(1, 30))  # --recheck 0: none at all
+
+
+def test_a_different_turned_solution_becomes_the_challenger_and_reset_forgets_it():
+    """Frame k's best is the mirror, frame k+1's best another turned pose (neither the track's
+    facing nor the challenger's): it does not replace the track but becomes the challenger;
+    reset() forgets the challenger and the track's age."""
+    from scipy.spatial.transform import Rotation
+
+    from swarmpose.tracking.body_tracker import REPLACED_TURN_DEG, root_turn_deg
+    from swarmpose.tracking.pso import PsoResult
+
+    body = load_body("builtin", "default")
+    tracker = BodyTracker(body, Intrinsics.kinect_v1(), TrackerConfig(mode="lift"))
+    front, back = body.rest_pose((0.0, 0.0, 3.0), (0.0, 1.0, 0.0, 0.0)), body.rest_pose((0.0, 0.0, 3.0))
+    lying = front.copy()
+    xyzw = (Rotation.from_quat(np.roll(front[3:7], -1)) * Rotation.from_euler("z", 120, degrees=True)).as_quat()
+    lying[3:7] = np.roll(xyzw, 1)  # (w, x, y, z)
+    assert min(root_turn_deg(front, lying), root_turn_deg(back, lying)) > REPLACED_TURN_DEG
+    own = front.copy()
+    own[10] = 0.2
+
+    def winning(best: np.ndarray) -> PsoResult:
+        return PsoResult(best, 1.0, np.array([1.0]), 2, np.stack([best, own]), np.array([1.0, 2.0]))
+
+    tracker.previous, tracker.history, tracker.age = front, [front], 7
+    np.testing.assert_array_equal(tracker._hold_facing(winning(back)), own)
+    np.testing.assert_array_equal(tracker._hold_facing(winning(lying)), own)  # not the same challenger
+    assert tracker.challenger is lying and tracker.history == [front]
+    tracker.reset()
+    assert tracker.challenger is None and tracker.age == 0 and tracker.previous is None
