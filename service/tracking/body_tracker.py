@@ -273,6 +273,8 @@ class BodyTracker:
         if again or not own:  # the same challenger won twice (or nothing is left of the track)
             self.challenger = None
             self.history.clear()  # the old track's poses are no seeds for the new one
+            if self.filter is not None:  # nor are they to be smoothed into the new one
+                self.filter.reset()
             return best
         self.challenger = best
         return result.personal_bests[min(own, key=lambda k: result.personal_values[k])].copy()

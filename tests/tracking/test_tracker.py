@@ -177,16 +177,18 @@ def test_a_turned_solution_replaces_the_track_only_when_it_wins_twice():
     from swarmpose.tracking.pso import PsoResult
 
     body = load_body("builtin", "default")
-    tracker = BodyTracker(body, Intrinsics.kinect_v1(), TrackerConfig(mode="lift"))
+    tracker = BodyTracker(body, Intrinsics.kinect_v1(), TrackerConfig(mode="lift", smoothing="one-euro"))
     front, back = body.rest_pose((0.0, 0.0, 3.0), (0.0, 1.0, 0.0, 0.0)), body.rest_pose((0.0, 0.0, 3.0))
     own = front.copy()
     own[10] = 0.2  # another pose of the track's facing
+    tracker.filter(front, 0.0)  # the smoothing has seen the old track
     mirrored_wins = PsoResult(back, 1.0, np.array([1.0]), 3, np.stack([back, own, back]), np.array([1.0, 2.0, 1.5]))
     tracker.previous, tracker.history = front, [front]
     np.testing.assert_array_equal(tracker._hold_facing(mirrored_wins), own)
     assert tracker.challenger is back and tracker.history == [front]
     np.testing.assert_array_equal(tracker._hold_facing(mirrored_wins), back)  # twice running: replaced
     assert tracker.challenger is None and tracker.history == []
+    np.testing.assert_allclose(tracker.filter(back, 1 / 30), back)  # the filter starts afresh: no blend
     tracker.challenger = back
     track_wins = PsoResult(own, 1.0, np.array([1.0]), 3, np.stack([own, back]), np.array([1.0, 1.5]))
     np.testing.assert_array_equal(tracker._hold_facing(track_wins), own)
