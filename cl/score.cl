@@ -34,7 +34,7 @@
 #define BACKGROUND 0 /* bits of 1/z = 0: nothing rendered */
 
 /* the one-work-item path scans and sets up triangles 8 at a time (include/raster.h) */
-#define VECTOR_RASTER (WG == 1 && VECROW && VECSETUP)
+#define VECTOR_RASTER (WG == 1 && VECROW)
 
 #if WG > 1 && !ZATOMIC
 #error "WG > 1 needs ZATOMIC=1"

@@ -112,16 +112,6 @@ def rss_bytes(pid: int) -> int:
     return int(psutil.Process(pid).memory_info().rss)
 
 
-def wait_until(predicate, timeout: float, step: float = 0.01) -> bool:
-    """Poll ``predicate`` every ``step`` s until it holds (True) or ``timeout`` s passed (False)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(step)
-    return False
-
-
 def log_problems(log: Path) -> list[str]:
     """The lines of a daemon log that report an error or a traceback."""
     words = ("ERROR", "Traceback", "CRITICAL", "Exception")

@@ -35,9 +35,10 @@ import threading
 import time
 from pathlib import Path
 
-from daemon_probe import Watcher, serve, session, stop, synth_folder, wait_until
+from daemon_probe import Watcher, serve, session, stop, synth_folder
 
 from swarmpose.cli.demo import free_local_port
+from swarmpose.core.polling import wait_until
 from swarmpose.publish.zenoh_link import open_session, zenoh_config
 
 CAMERA = "restart"
@@ -99,7 +100,7 @@ class HealthLog(threading.Thread):
 def measure(number: int, killed: float, ready: float, subscriber, watcher: Watcher, status_log: HealthLog,
             give_up_s: float) -> dict:
     """One cycle's figures, the router killed at ``killed`` and listening again at ``ready`` (monotonic s)."""
-    sub_back = time.monotonic() if wait_until(lambda: list(subscriber.info.routers_zid()), give_up_s) else None
+    sub_back = time.monotonic() if wait_until(lambda: list(subscriber.info.routers_zid()), give_up_s, 0.01) else None
     came = wait_until(lambda: any(t > ready for t in watcher.frame_times[-5:]), give_up_s, 0.005)
     first = next((t for t in watcher.frame_times if t > ready), None) if came else None
     last_before = max((t for t in watcher.frame_times if t < killed), default=killed)

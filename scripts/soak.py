@@ -20,9 +20,10 @@ import sys
 import time
 from pathlib import Path
 
-from daemon_probe import Watcher, log_problems, rss_bytes, serve, session, stop, synth_folder, wait_until
+from daemon_probe import Watcher, log_problems, rss_bytes, serve, session, stop, synth_folder
 
 from swarmpose.cli.demo import free_local_port
+from swarmpose.core.polling import wait_until
 
 MAX_GROWTH = 0.05
 CAMERA = "soak"

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -43,16 +42,6 @@ def wave_sequence(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("wave")
     assert main(["synth", "--motion", "builtin:wave", "--frames", "6", "--out", str(out), "--quiet"]) == 0
     return out
-
-
-def wait_until(predicate, timeout: float = 10.0, step: float = 0.05) -> bool:
-    """Poll ``predicate`` every ``step`` s until it holds (True) or ``timeout`` s passed (False)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(step)
-    return False
 
 
 def free_port() -> int:

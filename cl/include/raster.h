@@ -15,7 +15,7 @@
  * call on some CPU back ends (PoCL).
  *
  * On a CPU (one work-item per particle) the same arithmetic runs in 8 vector lanes
- * (VECROW, VECSETUP below): 8 triangles' candidate tests and set-ups at a time, then each
+ * (VECROW below): 8 triangles' candidate tests and set-ups at a time, then each
  * kept triangle's rows 8 pixels at a time; the z-buffer is bit-identical to the scalar
  * path's (tests/gpu/test_scorer.py) and the kernel 2x faster (BENCHMARKS.md, issue 13).
  */
@@ -24,14 +24,11 @@
 
 #include "include/util.h"
 
-/* VECROW: rows drawn 8 pixels at a time (vector lanes), for a plain z-buffer whose rows are
- * whole 8-int blocks; VECSETUP: with VECROW, score.cl's one-work-item path also scans and sets
- * up the triangles 8 at a time (keep_candidates, raster_kept). The scorer passes both. */
+/* VECROW (the scorer passes it; 0 if not): rows drawn 8 pixels at a time (vector lanes), for a
+ * plain z-buffer whose rows are whole 8-int blocks; score.cl's one-work-item path then also
+ * scans and sets up the triangles 8 at a time (keep_candidates, raster_kept). */
 #ifndef VECROW
-#define VECROW (!ZATOMIC && TW % 8 == 0)
-#endif
-#ifndef VECSETUP
-#define VECSETUP 1
+#define VECROW 0
 #endif
 #if VECROW && (ZATOMIC || TW % 8)
 #error "VECROW needs a plain z-buffer (ZATOMIC=0) and TW a multiple of 8"
@@ -183,36 +180,14 @@ typedef union { int8 v; int s[8]; } int8_lanes;
             cx.S = vc.x; cy.S = vc.y; cz.S = vc.z;                                                  \
         }
 
-#define MIN8(a, b) ((a) < (b) ? (a) : (b))
-#define MAX8(a, b) ((a) > (b) ? (a) : (b))
-
-/* ifloor / iceil / clampf (util.h) of 8 lanes */
-inline int8 ifloor8(const float8 x)
-{
-    const int8 t = convert_int8(x);
-    return t + (x < convert_float8(t));  /* comparisons give -1 where true */
-}
-
-inline int8 iceil8(const float8 x)
-{
-    const int8 t = convert_int8(x);
-    return t - (x > convert_float8(t));
-}
-
-inline float8 clampf8(const float8 x, const float lo, const float hi)
-{
-    const float8 y = x > lo ? x : (float8)(lo);
-    return y < hi ? y : (float8)(hi);
-}
-
 /* The box of pixel centres (x0, x1, y0, y1: first and last column and row) of 8 triangles,
  * clipped to the tile: the union of their vertices' vertex_span, computed from the extremes
  * of the coordinates (ceil, floor and the clamp are monotonic, so they commute with min/max). */
 #define TRIANGLE_BOXES(ax, ay, bx, by, cx, cy, x0, x1, y0, y1)                                       \
-    const int8 x0 = MAX8(iceil8(clampf8(MIN8(MIN8(ax, bx), cx) - 0.5f, -1.0f, (float)TW)), (int8)(0));        \
-    const int8 x1 = MIN8(ifloor8(clampf8(MAX8(MAX8(ax, bx), cx) - 0.5f, -1.0f, (float)TW)), (int8)(TW - 1));  \
-    const int8 y0 = MAX8(iceil8(clampf8(MIN8(MIN8(ay, by), cy) - 0.5f, -1.0f, (float)TH)), (int8)(0));        \
-    const int8 y1 = MIN8(ifloor8(clampf8(MAX8(MAX8(ay, by), cy) - 0.5f, -1.0f, (float)TH)), (int8)(TH - 1));
+    const int8 x0 = IMAX(iceil8(clampf8(IMIN(IMIN(ax, bx), cx) - 0.5f, -1.0f, (float)TW)), (int8)(0));        \
+    const int8 x1 = IMIN(ifloor8(clampf8(IMAX(IMAX(ax, bx), cx) - 0.5f, -1.0f, (float)TW)), (int8)(TW - 1));  \
+    const int8 y0 = IMAX(iceil8(clampf8(IMIN(IMIN(ay, by), cy) - 0.5f, -1.0f, (float)TH)), (int8)(0));        \
+    const int8 y1 = IMIN(ifloor8(clampf8(IMAX(IMAX(ay, by), cy) - 0.5f, -1.0f, (float)TH)), (int8)(TH - 1));
 
 /* triangle_candidate over all NF triangles, 8 at a time in vector lanes: the indices of those
  * that may cover a pixel centre go to lkeep (in triangle order); returns how many. */

@@ -7,7 +7,7 @@
 #ifndef SWARMPOSE_UTIL_H
 #define SWARMPOSE_UTIL_H
 
-#define IMIN(a, b) ((a) < (b) ? (a) : (b))
+#define IMIN(a, b) ((a) < (b) ? (a) : (b))  /* scalars or vectors alike */
 #define IMAX(a, b) ((a) > (b) ? (a) : (b))
 
 /* floor / ceil of a float already clamped to a small range (|x| < 2^31), as int */
@@ -28,6 +28,25 @@ inline float clampf(const float x, const float lo, const float hi)
 {
     const float y = x > lo ? x : lo;
     return y < hi ? y : hi;
+}
+
+/* ifloor / iceil / clampf of 8 lanes (the comparisons give -1 where true) */
+inline int8 ifloor8(const float8 x)
+{
+    const int8 t = convert_int8(x);
+    return t + (x < convert_float8(t));
+}
+
+inline int8 iceil8(const float8 x)
+{
+    const int8 t = convert_int8(x);
+    return t - (x > convert_float8(t));
+}
+
+inline float8 clampf8(const float8 x, const float lo, const float hi)
+{
+    const float8 y = x > lo ? x : (float8)(lo);
+    return y < hi ? y : (float8)(hi);
 }
 
 inline float dot4(const float4 a, const float4 b)

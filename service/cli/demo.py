@@ -28,6 +28,7 @@ from swarmpose.body.loader import load_body
 from swarmpose.cli.common import DEFAULTS, positive_int, quiet
 from swarmpose.cli.synth import print_synth_summary
 from swarmpose.core.errors import PublishError
+from swarmpose.core.polling import wait_until
 from swarmpose.core.settings import build
 from swarmpose.motion.builtin import builtin_motion
 from swarmpose.pipeline.config import ServiceConfig
@@ -67,13 +68,11 @@ def start_subscriber(endpoint: str, camera: str, count: int) -> tuple[subprocess
 
 def wait_for_subscriber(zenoh_sink, lines: list[str], timeout_s: float) -> bool:
     """True once the subscriber has declared its subscription and the worker's zenoh session sees it."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if zenoh_sink.state()["peers"] > 0 and any(line.startswith("listening on") for line in lines):
-            time.sleep(0.3)  # let the subscription's declaration reach the worker
-            return True
-        time.sleep(0.1)
-    return False
+    ready = wait_until(lambda: zenoh_sink.state()["peers"] > 0 and any(line.startswith("listening on")
+                                                                      for line in lines), timeout_s, 0.1)
+    if ready:
+        time.sleep(0.3)  # let the subscription's declaration reach the worker
+    return ready
 
 
 def run_demo(sequence: Path, out: Path, particles: int, generations: int, quiet: bool, frames: int) -> int:

@@ -137,7 +137,7 @@ class ParticleScorer:
         self.point_count = len(tables.point_bone)
         self.defines = {"NV": nv, "NF": nf, "NB": nb, "TW": self.tw, "TH": self.th, "WG": wg,
                         "ZATOMIC": self.atomic, "CULL": bool(cull_backfaces), "ZNEAR": float(znear),
-                        "VECSETUP": bool(vector_raster), "VECROW": vector, **sizes}
+                        "VECROW": vector, **sizes}
         self._mesh = self._upload_mesh(body)
         self._capacity = 0
         self._tile_box: TileBox | None = None

@@ -13,7 +13,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import cv2
@@ -21,6 +20,7 @@ import numpy as np
 import pytest
 
 from swarmpose.cli.main import main
+from swarmpose.core.polling import wait_until
 from swarmpose.sources.base import SKIP_WARNINGS
 
 LIFT = ("--mode", "lift", "--no-overlay")
@@ -145,11 +145,8 @@ def test_sigterm_stops_track_with_every_file_closed_and_readable(wave_sequence, 
     proc = subprocess.Popen([sys.executable, "-m", "swarmpose", "track", str(wave_sequence), "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     jsonl = out / "poses.jsonl"
-    deadline = time.monotonic() + 240
-    while proc.poll() is None and time.monotonic() < deadline:
-        if jsonl.is_file() and jsonl.read_bytes().count(b"\n") >= 2:
-            break
-        time.sleep(0.1)
+    wait_until(lambda: proc.poll() is not None or (jsonl.is_file() and jsonl.read_bytes().count(b"\n") >= 2), 240,
+               0.1)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err

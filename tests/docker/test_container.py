@@ -25,9 +25,10 @@ from pathlib import Path
 import jsonschema
 import pytest
 import zenoh
-from conftest import REPO, free_port, wait_until
+from conftest import REPO, free_port
 
 from swarmpose.cli.main import main
+from swarmpose.core.polling import wait_until
 
 PODMAN = shutil.which("podman")
 BUILD = REPO / "scripts" / "build-image.sh"

@@ -13,7 +13,6 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 from collections import defaultdict
 from datetime import timedelta
 from pathlib import Path
@@ -24,6 +23,7 @@ from conftest import free_port
 
 from swarmpose.body.skeleton import EVAL_JOINTS, EVAL_LINKS
 from swarmpose.cli.main import main
+from swarmpose.core.polling import wait_until
 
 rerun = pytest.importorskip("rerun", reason="rerun-sdk is not installed (pip install rerun-sdk; Python >= 3.11)")
 
@@ -286,9 +286,7 @@ def test_a_headless_view_is_served_to_a_remote_viewer(tracked, tmp_path):
         saver = subprocess.Popen([rerun_exe, "--port", str(free_port()), "--save", str(saved),
                                   f"rerun+http://127.0.0.1:{port}/proxy"], stdout=subprocess.DEVNULL,
                                  stderr=subprocess.DEVNULL, env=env)
-        deadline = time.monotonic() + 60  # synchronisation, not a speed requirement: wait for the data to arrive
-        while time.monotonic() < deadline and not received_all(saved):
-            time.sleep(0.2)
+        wait_until(lambda: received_all(saved), 60, 0.2)  # synchronisation, not a speed requirement
         view.send_signal(signal.SIGTERM)
         assert view.wait(timeout=60) == 0
         assert saver.wait(timeout=60) == 0

@@ -18,10 +18,11 @@ from pathlib import Path
 import jsonschema
 import pytest
 import zenoh
-from conftest import REPO, free_port, wait_until
+from conftest import REPO, free_port
 
 from swarmpose.body.loader import load_body
 from swarmpose.core.errors import PublishError
+from swarmpose.core.polling import wait_until
 from swarmpose.detect.registry import make_detector
 from swarmpose.pipeline.status import HealthFileSink
 from swarmpose.pipeline.step import FramePipeline
