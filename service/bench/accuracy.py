@@ -15,6 +15,11 @@ with the subject's own shape, and score it against the ground truth:
 
 Each (cell, mode) is one JSON file in ``OUT/results/``, written when it is done: an
 interrupted run resumes where it stopped. :func:`run_matrix` returns every record.
+
+With ``seeds`` > 1 every (cell, mode) is tracked once per tracker seed (0, 1, ...; seed 0's
+file keeps its name, seed s's ends in ``-seed{s}``): a cell's Δ moved by up to 90 mm between two
+seeds of the same code (BENCHMARKS.md, issue 12, fourth part), so a per-cell goal is judged on
+the mean over seeds (:func:`mean_over_seeds`).
 """
 
 from __future__ import annotations
@@ -166,10 +171,13 @@ def track_cell(cell: Cell, mode: str, folder: Path, assets: Path, tracker: dict,
 
 def run_matrix(out: Path, *, subset: str = "full", detectors: tuple[str, ...] | None = None,
                modes: tuple[str, ...] = MODES, frames: int = 40, tracker: dict | None = None,
-               assets: str | Path | None = None, progress: bool = True) -> list[dict]:
-    """Every (cell, mode) record of the matrix (computed, or read back from ``out/results``)."""
+               assets: str | Path | None = None, progress: bool = True, seeds: int = 1) -> list[dict]:
+    """Every (cell, mode, seed) record of the matrix (computed, or read back from ``out/results``);
+    ``seeds`` tracker seeds per (cell, mode), 0 .. seeds - 1."""
     if frames < 2:
         raise ConfigError(f"--frames must be at least 2, got {frames}")
+    if seeds < 1:
+        raise ConfigError(f"--seeds must be at least 1, got {seeds}")
     bad = [m for m in modes if m not in MODES]
     if bad:
         raise ConfigError(f"unknown mode {bad[0]!r}; choose from {', '.join(MODES)}")
@@ -177,18 +185,42 @@ def run_matrix(out: Path, *, subset: str = "full", detectors: tuple[str, ...] | 
     tracker = tracker_settings(tracker)
     out = Path(out)
     (out / "results").mkdir(parents=True, exist_ok=True)
-    todo = [(cell, mode) for cell in cells(subset, detectors) for mode in modes]
+    todo = [(cell, mode, seed) for seed in range(seeds) for cell in cells(subset, detectors) for mode in modes]
     records = []
     with progress_bar("bench accuracy", len(todo), enabled=progress, unit="run") as bar:
-        for cell, mode in todo:
-            path = out / "results" / f"{cell.name}-{mode}.json"
-            record = read_record(path, {"frames": frames, **tracker})
+        for cell, mode, seed in todo:
+            settings = {**tracker, "seed": seed} if seed else tracker  # seed 0: the records made before seeds
+            path = out / "results" / (f"{cell.name}-{mode}" + (f"-seed{seed}" if seed else "") + ".json")
+            record = read_record(path, {"frames": frames, **settings})
             if record is None:
                 folder = make_sequence(cell.sequence, out / "sequences" / cell.sequence.name, frames, root)
-                record = track_cell(cell, mode, folder, root, tracker, frames)
+                record = track_cell(cell, mode, folder, root, settings, frames)
                 write_record(path, record)
                 log.info("%s %s: %.1f mm", cell.name, mode, record["mpjpe_mm"] or float("nan"))
             records.append(record)
             bar.update(1)
     return records
 
+
+
+AVERAGED = ("mpjpe_mm", "A100", "lost", "facing_deg", "facing_ok", "fps")
+"""The fields of a record :func:`mean_over_seeds` averages (the others are the same for every seed)."""
+
+
+def mean_over_seeds(records: list[dict]) -> list[dict]:
+    """One record per (cell, mode): :data:`AVERAGED` fields averaged over its seeds (None where a
+    seed had none), plus ``seeds`` (how many) and ``mpjpe_spread_mm`` (largest minus smallest Δ)."""
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for record in records:
+        groups.setdefault((record["cell"], record["mode"]), []).append(record)
+    merged = []
+    for group in groups.values():
+        out = {k: v for k, v in group[0].items() if k != "seed"}
+        for key in AVERAGED:
+            values = [r.get(key) for r in group]
+            out[key] = None if any(v is None for v in values) else float(np.mean(values))
+        deltas = [r["mpjpe_mm"] for r in group if r.get("mpjpe_mm") is not None]
+        out["seeds"] = len(group)
+        out["mpjpe_spread_mm"] = float(np.ptp(deltas)) if deltas else None
+        merged.append(out)
+    return merged

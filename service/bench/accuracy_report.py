@@ -24,8 +24,11 @@ def _mm(value) -> str:
 
 def format_table(records: list[dict]) -> str:
     """One Markdown row per cell: Δ (mm) per mode, hybrid/joints, and the hybrid fit's
-    A(100 mm), lost frames, share of frames facing within 30°, and the detector's 2D error."""
+    A(100 mm), lost frames, share of frames facing within 30°, and the detector's 2D error;
+    records averaged over seeds (``mpjpe_spread_mm``) add the hybrid Δ's spread between seeds."""
+    seeded = any("mpjpe_spread_mm" in r for r in records)
     head = ("| motion | shape | yaw | height, distance (m) | detector | " + " | ".join(f"Δ {m}" for m in MODES)
+            + (" | hybrid spread over seeds" if seeded else "")
             + " | hybrid/joints | A100 hybrid | lost hybrid | facing ≤ 30° hybrid | detector px | swapped |")
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for modes in sorted(_cells(records).values(), key=lambda m: _order(next(iter(m.values())))):
@@ -37,6 +40,7 @@ def format_table(records: list[dict]) -> str:
         lines.append(
             f"| {r['motion']} | {r['shape']} | {r['yaw_deg']}° | {r['camera_height']:.1f}, {r['camera_distance']:.1f} "
             f"| {r['detector']} | " + " | ".join(_mm(modes.get(m, {}).get("mpjpe_mm")) for m in MODES)
+            + (f" | {_mm(hybrid.get('mpjpe_spread_mm'))}" if seeded else "")
             + f" | {ratio} | {_pct(hybrid.get('A100'))} | {hybrid.get('lost', '–')} | {_pct(hybrid.get('facing_ok'))} "
             f"| {_mm(r.get('detector_px'))} | {swapped} |")
     return "\n".join(lines)

@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from swarmpose.bench.accuracy import run_matrix
+from swarmpose.bench.accuracy import mean_over_seeds, run_matrix
 from swarmpose.bench.accuracy_report import format_summary, format_table, plot_heatmap
 from swarmpose.bench.detect import bench_detectors, format_detect_bench
 from swarmpose.bench.matrix import DETECTORS, MODES, SUBSETS
@@ -68,12 +68,14 @@ def cmd_bench_accuracy(args: argparse.Namespace) -> int:
     """The tracker over the benchmark matrix: per cell and mode Δ, A(100), lost frames, facing."""
     tracker = {"particles": args.particles, "generations": args.generations, "max_people": args.max_people}
     records = run_matrix(Path(args.out), subset=args.subset, detectors=args.detectors, modes=args.modes,
-                         frames=args.frames, tracker=tracker, assets=args.assets, progress=not quiet(args))
+                         frames=args.frames, tracker=tracker, assets=args.assets, progress=not quiet(args),
+                         seeds=args.seeds)
     out = Path(args.out)
-    table = "\n\n".join([format_summary(records), format_table(records)]) + "\n"
+    merged = mean_over_seeds(records) if args.seeds > 1 else records
+    table = "\n\n".join([format_summary(merged), format_table(merged)]) + "\n"
     (out / "table.md").write_text(table)
     (out / "records.json").write_text(json.dumps(records, indent=1))
-    plot_heatmap(records, out / "heatmap.png")
+    plot_heatmap(merged, out / "heatmap.png")
     if args.json:
         print(json.dumps({"out": str(out), "records": records}))
     else:
@@ -171,6 +173,9 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
     p.add_argument("--frames", type=positive_int, default=40, help="frames per sequence")
     p.add_argument("--max-people", type=positive_int, default=1,
                    help="people tracked per frame (> 1: segmentation and a detection per person)")
+    p.add_argument("--seeds", type=positive_int, default=1,
+                   help="tracker seeds per cell and mode; the table and heat map show the mean over them "
+                        "(a cell's Δ varies between seeds)")
     _add_budget_and_assets(p)
     p.add_argument("--json", action="store_true", help="one JSON object with every record")
     p.set_defaults(func=cmd_bench_accuracy)

@@ -15,7 +15,7 @@ import json
 import pytest
 from conftest import ASSETS, needs_assets
 
-from swarmpose.bench.accuracy import run_matrix
+from swarmpose.bench.accuracy import mean_over_seeds, run_matrix
 from swarmpose.bench.matrix import cells, sequences
 from swarmpose.cli.main import main
 
@@ -94,3 +94,38 @@ def test_a_sequence_too_short_for_the_run_is_rendered_again(tmp_path):
     make_sequence(seq, folder, 3, ASSETS)
     assert len((folder / "groundtruth.jsonl").read_text().splitlines()) == 3
     assert len(list((folder / "depth").glob("*.png"))) == 3
+
+
+@needs_assets
+def test_seeds_track_each_cell_again_and_the_table_shows_their_mean(regression):
+    out, records = regression
+    first = {r["cell"]: r for r in records if r["mode"] == "joints"}
+    argv = ["bench", "accuracy", "--subset", "regression", "--modes", "joints", "--frames", str(FRAMES),
+            "--particles", "32", "--generations", "32", "--assets", str(ASSETS), "--out", str(out), "--quiet",
+            "--seeds", "2"]
+    assert main(argv) == 0
+    second = {p.name: json.loads(p.read_text()) for p in (out / "results").glob("*-joints-seed1.json")}
+    assert len(second) == len(first) and all(r["seed"] == 1 for r in second.values())
+    again = json.loads((out / "records.json").read_text())
+    assert [r for r in again if r.get("seed") is None] == [first[c] for c in first], "seed 0 is read back"
+    assert any(r["mpjpe_mm"] != first[r["cell"]]["mpjpe_mm"] for r in second.values()), "another seed, another run"
+    table = (out / "table.md").read_text()
+    assert "hybrid spread over seeds" in table
+    for record in second.values():  # Δ per mode (hybrid, joints, depth, lift), then hybrid's spread
+        mean = (record["mpjpe_mm"] + first[record["cell"]]["mpjpe_mm"]) / 2
+        assert f"| movenet | – | {mean:.0f} | – | – | – |" in table, (mean, table)
+
+
+def test_mean_over_seeds_averages_per_cell_and_mode():
+    base = {"cell": "c", "motion": "walk", "frames": 20}
+    records = [{**base, "mode": "hybrid", "mpjpe_mm": 40.0, "A100": 0.9, "lost": 0, "facing_deg": 10.0,
+                "facing_ok": 1.0, "fps": 8.0},
+               {**base, "mode": "hybrid", "seed": 1, "mpjpe_mm": 70.0, "A100": 0.7, "lost": 3, "facing_deg": 20.0,
+                "facing_ok": 0.5, "fps": 6.0},
+               {**base, "mode": "lift", "mpjpe_mm": 55.0, "A100": 0.8, "lost": 0, "facing_deg": None,
+                "facing_ok": 0.0, "fps": 30.0}]
+    merged = {r["mode"]: r for r in mean_over_seeds(records)}
+    assert merged["hybrid"] == {**base, "mode": "hybrid", "mpjpe_mm": 55.0, "A100": 0.8, "lost": 1.5,
+                                "facing_deg": 15.0, "facing_ok": 0.75, "fps": 7.0, "seeds": 2, "mpjpe_spread_mm": 30.0}
+    assert merged["lift"]["seeds"] == 1 and merged["lift"]["mpjpe_spread_mm"] == 0.0
+    assert merged["lift"]["facing_deg"] is None
