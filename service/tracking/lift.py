@@ -27,6 +27,8 @@ JOINT_RADIUS: dict[str, float] = {
     "left_heel": 0.0, "right_heel": 0.0, "left_toe": 0.0, "right_toe": 0.0,
 }
 """Depth (m) of each joint centre behind the body surface a camera sees in front of it."""
+LIFT_WINDOW_M = 0.06
+"""Width (m at the person's typical depth) of the window a keypoint's depth is read in."""
 
 
 def sample_surface_depth(depth: np.ndarray, u: float, v: float, window_px: int, cluster_m: float = 0.10) -> float:
@@ -50,7 +52,7 @@ def sample_surface_depth(depth: np.ndarray, u: float, v: float, window_px: int, 
 
 
 def lift_keypoints(depth: np.ndarray, intrinsics: Intrinsics, points: dict[str, tuple[float, float, float]],
-                   window_m: float = 0.06, max_spread_m: float = 0.7) -> dict[str, np.ndarray]:
+                   window_m: float = LIFT_WINDOW_M, max_spread_m: float = 0.7) -> dict[str, np.ndarray]:
     """J^e: body point -> (3,) camera-frame position (m) or NaNs, for 2D points {name: (x, y, score)}.
 
     A lift more than ``max_spread_m`` in depth from the median of the lifts (with at least

@@ -1,15 +1,18 @@
-"""Personalisation: key frames, the bone-length term, and a whole fit on a synthetic subject
-whose true shape is known (the oracle: the subject's own MakeHuman body)."""
+"""Personalisation: key frames, the bone-length term and its noise-debiased lengths, the
+volume-matched fitting body, and a whole fit on a synthetic subject whose true shape is known
+(the oracle: the subject's own MakeHuman body)."""
 
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
 from conftest import MAKEHUMAN, MOCAP, ValidatingSink, needs_assets
 
-from swarmpose.tracking.personalise import bone_energy, spread_frames
+from swarmpose.body.shape_space import match_volume
+from swarmpose.tracking.personalise import MAX_CORRECTION, bone_energy, debiased_length, spread_frames
 
 
 def test_key_frames_are_spread_over_the_poses():
@@ -35,6 +38,99 @@ def test_bone_energy_is_the_mean_length_difference_in_cm():
     assert bone_energy(body, {}) == 0.0
 
 
+def test_debiased_length_by_hand():
+    """m = 1.0, MAD = 0.1, so v = (1.4826 * 0.1)^2 and L = m - k v / (2 m); a spread too large
+    for the first-order correction is capped at MAX_CORRECTION of m; no length: NaN."""
+    lengths = np.array([0.9, 1.0, 1.1, np.nan, 1.05, 0.95])  # median 1.0, |deviations| .1 .1 .05 .05 0
+    v = (1.4826 * 0.05) ** 2
+    assert debiased_length(lengths, 1.0) == pytest.approx(1.0 - v / 2.0, abs=1e-12)
+    assert debiased_length(lengths, 2.0) == pytest.approx(1.0 - v, abs=1e-12)
+    assert debiased_length(lengths, 0.0) == pytest.approx(1.0, abs=1e-12)  # the plain median
+    assert debiased_length(np.array([0.1, 1.0, 1.9]), 2.0) == pytest.approx(1.0 - MAX_CORRECTION)
+    assert np.isnan(debiased_length(np.array([np.nan, np.nan])))
+
+
+def _noisy_lengths(rng, length, sigma, frames, axes):
+    """Monte-Carlo observed lengths (frames,) of a bone of ``length`` m whose two ends get Gaussian
+    noise of ``sigma`` m on the first ``axes`` camera axes (2: the image plane; 3: isotropic) and
+    whose direction turns within the image plane from frame to frame."""
+    angle = rng.uniform(0.0, 2.0 * np.pi, frames)
+    bone = length * np.stack([np.cos(angle), np.sin(angle), np.zeros(frames)], axis=1)
+    noise = np.zeros((2, frames, 3))
+    noise[..., :axes] = rng.normal(0.0, sigma, (2, frames, axes))
+    return np.linalg.norm(bone + noise[1] - noise[0], axis=1)
+
+
+def test_debiased_length_removes_the_lengthening_by_noise_monte_carlo():
+    """Known L = 25 cm, 1.5 cm of noise per axis on each end (2.1 cm on the difference): the
+    median comes out long by about var/(2L) per axis across the bone; the debiased length,
+    with as many noise axes across the bone as the noise has, is within 0.2 mm of L (the median's
+    Monte-Carlo error here is about 0.05 mm)."""
+    rng = np.random.default_rng(7)
+    true, sigma, frames = 0.25, 0.015, 200_000
+    excess = 2 * sigma**2 / (2 * true)  # one axis across the bone, difference variance 2 sigma^2
+    planar = _noisy_lengths(rng, true, sigma, frames, axes=2)
+    assert np.median(planar) - true == pytest.approx(excess, abs=2e-4)
+    assert debiased_length(planar, 1.0) == pytest.approx(true, abs=2e-4)
+    spatial = _noisy_lengths(rng, true, sigma, frames, axes=3)
+    assert np.median(spatial) - true == pytest.approx(2 * excess, abs=2e-4)
+    assert debiased_length(spatial, 2.0) == pytest.approx(true, abs=2e-4)
+    swapped = planar.copy()  # 5 % of frames measure some other pair of keypoints
+    swapped[::20] = rng.uniform(0.0, 1.0, swapped[::20].size)
+    assert debiased_length(swapped, 1.0) == pytest.approx(true, abs=1.5e-3)
+
+
+@dataclass(frozen=True)
+class _Mesh:
+    """The two fields of a body that match_volume reads."""
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+
+
+def _icosahedron() -> _Mesh:
+    t = (1.0 + 5.0**0.5) / 2.0
+    v = np.array([(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t), (0, 1, -t),
+                  (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)], float)
+    f = np.array([(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2),
+                  (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5),
+                  (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)])
+    return _Mesh(v / np.linalg.norm(v[0]), f)
+
+
+def test_match_volume_moves_the_vertices_out_along_their_normals_to_the_full_volume():
+    """Oracle by hand: a unit icosahedron's vertex normals are radial, so moving every vertex out
+    by d scales it by 1 + d; to enclose the volume of the same icosahedron scaled by 1.1, d = 0.1.
+    The winding does not matter, and a larger mesh is shrunk."""
+    ico = _icosahedron()
+    big = _Mesh(1.1 * ico.vertices, ico.triangles)
+    for mesh in (ico, _Mesh(ico.vertices, ico.triangles[:, ::-1].copy())):
+        matched = match_volume(mesh, big, iterations=8)
+        np.testing.assert_allclose(matched.vertices, 1.1 * ico.vertices, atol=1e-6)
+    np.testing.assert_allclose(match_volume(big, ico, iterations=8).vertices, ico.vertices, atol=1e-6)
+
+
+@needs_assets
+def test_the_makehuman_fitting_body_encloses_the_full_bodys_volume():
+    """The decimated tracking body encloses about 2 % less than the full mesh; the fitting body
+    the same volume (divergence theorem, numpy), with the same bones and points."""
+    from swarmpose.body.shape_space import MakeHumanSpace
+    from swarmpose.tracking.personalise import body_measures
+
+    space = MakeHumanSpace(MAKEHUMAN)
+    x = space.start
+    x[3] = 0.9  # heavy
+    full, tracking, fitting = space.full_body(x), space.tracking_body(x), space.fitting_body(x)
+    volume = body_measures(full)["volume_l"]
+    assert body_measures(tracking)["volume_l"] < 0.99 * volume
+    assert body_measures(fitting)["volume_l"] == pytest.approx(volume, rel=5e-4)
+    assert len(fitting.vertices) == len(tracking.vertices)
+    moved = np.linalg.norm(fitting.vertices - tracking.vertices, axis=1)
+    assert 0.0003 < moved.mean() < 0.003  # a decimation's corners: about a millimetre
+    np.testing.assert_array_equal(fitting.point_rest, tracking.point_rest)
+    np.testing.assert_array_equal(fitting.bone_heads, tracking.bone_heads)
+
+
 @pytest.fixture(scope="module")
 def tall_walk(tmp_path_factory):
     if not MAKEHUMAN.is_dir():
@@ -45,6 +141,79 @@ def tall_walk(tmp_path_factory):
     assert main(["synth", "--body", f"makehuman:{MAKEHUMAN}", "--shape", "male-tall", "--motion",
                  str(MOCAP / "bvh11_131_01.bvh"), "--frames", "16", "--out", str(out), "--quiet"]) == 0
     return out
+
+
+def _first_hit_z(origin_dir: np.ndarray, vertices: np.ndarray, triangles: np.ndarray) -> float:
+    """Depth (z, m) of the nearest triangle a ray from the camera centre along ``origin_dir`` (3,),
+    z = 1, hits (Möller-Trumbore over every triangle, numpy); 0 when none."""
+    a, b, c = vertices[triangles[:, 0]], vertices[triangles[:, 1]], vertices[triangles[:, 2]]
+    e1, e2 = b - a, c - a
+    p = np.cross(origin_dir, e2)
+    det = np.einsum("ij,ij->i", e1, p)
+    ok = np.abs(det) > 1e-12
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = -a
+    u = np.einsum("ij,ij->i", s, p) * inv
+    q = np.cross(s, e1)
+    v = (q @ origin_dir) * inv
+    t = np.einsum("ij,ij->i", e2, q) * inv
+    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+    return float(t[hit].min()) if np.any(hit) else 0.0
+
+
+@needs_assets
+def test_model_depth_is_the_first_hit_of_each_pixel_ray():
+    """The body's rendered depth against a numpy ray-triangle intersection at sampled pixels."""
+    from swarmpose.body.loader import load_body
+    from swarmpose.core.camera import Intrinsics
+    from swarmpose.tracking.personalise import model_depth
+
+    body = load_body(f"makehuman:{MAKEHUMAN}", "female").tracking_lod(1500)
+    k = Intrinsics(width=160, height=120, fx=140.0, fy=140.0, cx=79.5, cy=59.5)
+    pose = body.rest_pose(translation=(0.0, 0.0, 3.0), quaternion=(0.0, 1.0, 0.0, 0.0))  # upright, facing the camera
+    depth = model_depth(body, pose, k)
+    verts = body.pose(pose[None], "dqs")[0]
+    rng = np.random.default_rng(3)
+    inside = np.argwhere(depth > 0)
+    assert len(inside) > 300  # the person covers part of the image
+    picks = np.vstack([inside[rng.choice(len(inside), 12, replace=False)], [[0, 0], [5, 150]]])
+    for row, col in picks:
+        ray = np.array([(col - k.cx) / k.fx, (row - k.cy) / k.fy, 1.0])
+        assert depth[row, col] == pytest.approx(_first_hit_z(ray, verts, np.asarray(body.triangles)), abs=1e-4)
+
+
+@needs_assets
+def test_lift_bias_on_the_model_is_the_lifts_own_lengthening_on_the_observed_frames(tall_walk):
+    """Oracle: the ground-truth 2D joints of a synthetic walk lifted on its observed (noisy) depth
+    give each limb a length other than the true rest length; lift_bias, measured on the true body's
+    own noise-free render at the true poses, predicts that difference (within 0.5 cm per limb and
+    0.2 cm on average over the limbs: the observation has sensor noise and a room, the model none)."""
+    from swarmpose.body.loader import load_body
+    from swarmpose.sources.registry import open_source
+    from swarmpose.tracking.body_tracker import observed_depth
+    from swarmpose.tracking.lift import lift_keypoints
+    from swarmpose.tracking.personalise import LIMB_BONES, lift_bias
+
+    body = load_body(f"makehuman:{MAKEHUMAN}", "male-tall")
+    truth = [json.loads(line) for line in (tall_walk / "groundtruth.jsonl").read_text().splitlines()]
+    source = open_source(str(tall_walk))
+    frames = list(source)
+    source.close()
+    poses = [np.array(t["pose"]) for t in truth]
+    seen = {bone: [] for bone in LIMB_BONES}
+    for frame, t in zip(frames, truth):
+        points = {n: (xy[0], xy[1], 1.0) for n, xy in t["joints2d"].items() if xy is not None}
+        lifted = lift_keypoints(observed_depth(frame.depth), frame.intrinsics, points)
+        for a, b in LIMB_BONES:
+            if np.all(np.isfinite(lifted[a])) and np.all(np.isfinite(lifted[b])):
+                seen[(a, b)].append(np.linalg.norm(lifted[a] - lifted[b]))
+    measured = {(a, b): np.median(v) - np.linalg.norm(body.point(a) - body.point(b)) for (a, b), v in seen.items()}
+    predicted = lift_bias(body, poses, frames, frames[0].intrinsics)
+    assert set(predicted) == set(LIMB_BONES)
+    diff = np.array([predicted[bone] - measured[bone] for bone in LIMB_BONES])
+    assert np.all(np.abs(diff) < 0.005), diff
+    assert abs(diff.mean()) < 0.002, diff
+    assert np.ptp(list(measured.values())) > 0.003  # the lift's error differs between limbs: not a trivial pass
 
 
 @needs_assets
