@@ -27,8 +27,8 @@ for subject in male female male-heavy; do
   [ -s "$seq/groundtruth.jsonl" ] || "$S" -q synth --body "makehuman:$MH" --shape "$subject" --motion "$WALK" \
       --frames 50 --out "$seq" >/dev/null
   run "auto-$subject" "$S" -q personalize "$seq" --body "makehuman:$MH" --frames 30 --out "$OUT/auto-$subject.glb" --json
-  [ -s "$OUT/true-$subject.glb" ] || "$S" -q body --body "makehuman:$MH" --shape "$subject" \
-      --export "$OUT/true-$subject.glb" >/dev/null
+  [ -s "$OUT/true-$subject.glb" ] || { "$S" -q body --body "makehuman:$MH" --shape "$subject" \
+      --export "$OUT/true-$subject.tmp.glb" >/dev/null && mv "$OUT/true-$subject.tmp.glb" "$OUT/true-$subject.glb"; }
   for seed in $SEEDS; do
     tag=$([ "$seed" = 0 ] && echo "" || echo "-s$seed")  # seed 0 keeps the names of the one-seed runs
     run "eval-$subject-auto$tag" "$S" -q eval "$seq" --body "$OUT/auto-$subject.glb" --frames 50 --seed "$seed" --json
@@ -42,15 +42,14 @@ for subject in male female male-heavy; do
         --frames 50 --seed "$seed" --json
   done
 done
-seq="$OUT/walk-female-tall"
-[ -s "$seq/groundtruth.jsonl" ] || "$S" -q synth --body "makehuman:$MH" --shape female-tall --motion "$WALK" \
-    --frames 60 --out "$seq" >/dev/null
-for n in 5 10 20 30 60; do
-  run "frames-$n" "$S" -q personalize "$seq" --body "makehuman:$MH" --frames "$n" --out "$OUT/frames-$n.glb" --json
-done
-seq="$OUT/jacks-female-tall"
-[ -s "$seq/groundtruth.jsonl" ] || "$S" -q synth --body "makehuman:$MH" --shape female-tall --motion "$JACKS" \
-    --frames 60 --out "$seq" >/dev/null
-for n in 5 10 20 30 60; do
-  run "jacks-frames-$n" "$S" -q personalize "$seq" --body "makehuman:$MH" --frames "$n" --out "$OUT/jacks-frames-$n.glb" --json
-done
+frames_curve() {  # sequence name, clip, prefix of the run names: height error over frames used
+  local seq="$OUT/$1"
+  [ -s "$seq/groundtruth.jsonl" ] || "$S" -q synth --body "makehuman:$MH" --shape female-tall --motion "$2" \
+      --frames 60 --out "$seq" >/dev/null
+  for n in 5 10 20 30 60; do
+    run "${3}frames-$n" "$S" -q personalize "$seq" --body "makehuman:$MH" --frames "$n" \
+        --out "$OUT/${3}frames-$n.glb" --json
+  done
+}
+frames_curve walk-female-tall "$WALK" ""
+frames_curve jacks-female-tall "$JACKS" "jacks-"

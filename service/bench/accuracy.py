@@ -196,15 +196,15 @@ def run_matrix(out: Path, *, subset: str = "full", detectors: tuple[str, ...] | 
                 folder = make_sequence(cell.sequence, out / "sequences" / cell.sequence.name, frames, root)
                 record = track_cell(cell, mode, folder, root, settings, frames)
                 write_record(path, record)
-                log.info("%s %s: %.1f mm", cell.name, mode, record["mpjpe_mm"] or float("nan"))
+                log.info("%s %s seed %d: %.1f mm", cell.name, mode, seed, record["mpjpe_mm"] or float("nan"))
             records.append(record)
             bar.update(1)
     return records
 
 
-
-AVERAGED = ("mpjpe_mm", "A100", "lost", "facing_deg", "facing_ok", "fps")
-"""The fields of a record :func:`mean_over_seeds` averages (the others are the same for every seed)."""
+AVERAGED = ("mpjpe_mm", "A100", "lost", "facing_deg", "facing_ok", "fps", "detector_px", "swapped")
+"""The fields of a record :func:`mean_over_seeds` averages (the others are the same for every seed;
+the detector's errors are not: it runs on a crop around the track)."""
 
 
 def mean_over_seeds(records: list[dict]) -> list[dict]:
@@ -219,8 +219,8 @@ def mean_over_seeds(records: list[dict]) -> list[dict]:
         for key in AVERAGED:
             values = [r.get(key) for r in group]
             out[key] = None if any(v is None for v in values) else float(np.mean(values))
-        deltas = [r["mpjpe_mm"] for r in group if r.get("mpjpe_mm") is not None]
+        deltas = [r.get("mpjpe_mm") for r in group]
         out["seeds"] = len(group)
-        out["mpjpe_spread_mm"] = float(np.ptp(deltas)) if deltas else None
+        out["mpjpe_spread_mm"] = None if any(d is None for d in deltas) else float(np.ptp(deltas))
         merged.append(out)
     return merged

@@ -41,9 +41,14 @@ def format_table(records: list[dict]) -> str:
             f"| {r['motion']} | {r['shape']} | {r['yaw_deg']}° | {r['camera_height']:.1f}, {r['camera_distance']:.1f} "
             f"| {r['detector']} | " + " | ".join(_mm(modes.get(m, {}).get("mpjpe_mm")) for m in MODES)
             + (f" | {_mm(hybrid.get('mpjpe_spread_mm'))}" if seeded else "")
-            + f" | {ratio} | {_pct(hybrid.get('A100'))} | {hybrid.get('lost', '–')} | {_pct(hybrid.get('facing_ok'))} "
-            f"| {_mm(r.get('detector_px'))} | {swapped} |")
+            + f" | {ratio} | {_pct(hybrid.get('A100'))} | {_count(hybrid.get('lost'))} "
+            f"| {_pct(hybrid.get('facing_ok'))} | {_mm(r.get('detector_px'))} | {swapped} |")
     return "\n".join(lines)
+
+
+def _count(value) -> str:
+    """A count, or the mean of counts over seeds (one decimal when not whole)."""
+    return "–" if value is None else f"{value:.0f}" if float(value).is_integer() else f"{value:.1f}"
 
 
 def _pct(value) -> str:

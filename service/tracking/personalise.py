@@ -36,7 +36,11 @@ by a constant per joint): with noise-free 2D joints the same walks' limbs came o
 the male bodies and 1.1-1.5 % long on the female ones. So before the sweep and each round the
 lift is run on the current shape's own noise-free render at the key frames' poses
 (:func:`lift_bias`), and E_B's lengths are the observed ones less that bias: like E, E_B then
-compares what the sensor and the lift make of a candidate body with what they made of the person.
+compares what the sensor and the lift make of a body with what they made of the person. The bias
+is the current shape's, used for every candidate of the sweep or the round that follows (the
+start shape's for the sweep, whose genders are far from it: the bias flips sign between male and
+female bodies); calibrating each candidate would cost 1.5-2 s apiece. The energies of different
+rounds are therefore measured against different E_B targets.
 
 The bodies scored are :meth:`~swarmpose.body.shape_space.ShapeSpace.fitting_body`: for MakeHuman,
 the tracking mesh moved out to enclose the full mesh's volume, which the decimation lowers by
@@ -119,14 +123,15 @@ class FitSettings:
     seed: int = 0
     pose_steps: int = 2
     bone_weight: float = BONE_WEIGHT
-    lift_bias: bool = True  # take the lift's own lengthening (lift_bias) off the observed limb lengths
+    debias_lift: bool = True  # take the lift's own lengthening (lift_bias) off the observed limb lengths
     sweep: dict[str, tuple[float, ...]] = field(default_factory=lambda: dict(SWEEP))
 
 
 @dataclass
 class ShapeFit:
     """The result: parameters ``x`` (D,) and by name, the full-resolution and tracking bodies,
-    the key frames (indices into the samples that had a pose), the energy after each round, and seconds."""
+    the key frames (indices into the samples that had a pose), the energy after each round (each
+    against that round's E_B targets, see the module docstring), and seconds."""
 
     x: np.ndarray
     parameters: dict[str, float]
@@ -159,14 +164,14 @@ def debiased_length(lengths: np.ndarray, noise_axes: float = NOISE_AXES) -> floa
     L ≈ m − k·v / (2m); v is the squared normalised MAD (1.4826·MAD)^2, robust to swapped or
     mislabelled keypoints. The correction is capped at :data:`MAX_CORRECTION` of m. NaN when
     no length is finite."""
-    v = np.asarray(lengths, float)
-    v = v[np.isfinite(v)]
-    if v.size == 0:
+    seen = np.asarray(lengths, float)
+    seen = seen[np.isfinite(seen)]
+    if seen.size == 0:
         return float("nan")
-    m = float(np.median(v))
+    m = float(np.median(seen))
     if m <= 0.0:
         return m
-    spread = 1.4826 * float(np.median(np.abs(v - m)))
+    spread = 1.4826 * float(np.median(np.abs(seen - m)))
     return m - min(noise_axes * spread * spread / (2.0 * m), MAX_CORRECTION * m)
 
 
@@ -319,7 +324,7 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
     def calibrate(x_now: np.ndarray) -> None:
         """E_B's lengths: the observed ones less the lift's bias on the full body of ``x_now`` at
         the key frames' current poses (see the module docstring)."""
-        if not (observed and settings.lift_bias):
+        if not (observed and settings.debias_lift):
             return
         bias = lift_bias(space.full_body(x_now), [k.pose for k in keys], [k.sample.frame for k in keys], intrinsics)
         bones.update({bone: length - bias.get(bone, 0.0) for bone, length in observed.items()})

@@ -100,6 +100,8 @@ def test_a_sequence_too_short_for_the_run_is_rendered_again(tmp_path):
 def test_seeds_track_each_cell_again_and_the_table_shows_their_mean(regression):
     out, records = regression
     first = {r["cell"]: r for r in records if r["mode"] == "joints"}
+    seed0 = sorted((out / "results").glob("*-joints.json"))
+    stamps = [p.stat().st_mtime_ns for p in seed0]
     argv = ["bench", "accuracy", "--subset", "regression", "--modes", "joints", "--frames", str(FRAMES),
             "--particles", "32", "--generations", "32", "--assets", str(ASSETS), "--out", str(out), "--quiet",
             "--seeds", "2"]
@@ -107,7 +109,12 @@ def test_seeds_track_each_cell_again_and_the_table_shows_their_mean(regression):
     second = {p.name: json.loads(p.read_text()) for p in (out / "results").glob("*-joints-seed1.json")}
     assert len(second) == len(first) and all(r["seed"] == 1 for r in second.values())
     again = json.loads((out / "records.json").read_text())
-    assert [r for r in again if r.get("seed") is None] == [first[c] for c in first], "seed 0 is read back"
+    assert [r for r in again if r.get("seed") is None] == [first[c] for c in first]
+    assert [p.stat().st_mtime_ns for p in seed0] == stamps, "seed 0's records are read back, not run again"
+    seed1 = sorted((out / "results").glob("*-joints-seed1.json"))
+    stamps1 = [p.stat().st_mtime_ns for p in seed1]
+    assert main(argv) == 0
+    assert [p.stat().st_mtime_ns for p in seed1] == stamps1, "and so are seed 1's on the next run"
     assert any(r["mpjpe_mm"] != first[r["cell"]]["mpjpe_mm"] for r in second.values()), "another seed, another run"
     table = (out / "table.md").read_text()
     assert "hybrid spread over seeds" in table
@@ -119,13 +126,20 @@ def test_seeds_track_each_cell_again_and_the_table_shows_their_mean(regression):
 def test_mean_over_seeds_averages_per_cell_and_mode():
     base = {"cell": "c", "motion": "walk", "frames": 20}
     records = [{**base, "mode": "hybrid", "mpjpe_mm": 40.0, "A100": 0.9, "lost": 0, "facing_deg": 10.0,
-                "facing_ok": 1.0, "fps": 8.0},
+                "facing_ok": 1.0, "fps": 8.0, "detector_px": 4.0, "swapped": 0.0},
                {**base, "mode": "hybrid", "seed": 1, "mpjpe_mm": 70.0, "A100": 0.7, "lost": 3, "facing_deg": 20.0,
-                "facing_ok": 0.5, "fps": 6.0},
+                "facing_ok": 0.5, "fps": 6.0, "detector_px": 6.0, "swapped": 0.5},
                {**base, "mode": "lift", "mpjpe_mm": 55.0, "A100": 0.8, "lost": 0, "facing_deg": None,
-                "facing_ok": 0.0, "fps": 30.0}]
+                "facing_ok": 0.0, "fps": 30.0, "detector_px": 4.0, "swapped": 0.0},
+               {**base, "mode": "depth", "mpjpe_mm": None, "A100": 0.0, "lost": 20, "facing_deg": None,
+                "facing_ok": 0.0, "fps": 9.0, "detector_px": None, "swapped": None},
+               {**base, "mode": "depth", "seed": 1, "mpjpe_mm": 80.0, "A100": 0.5, "lost": 2, "facing_deg": 30.0,
+                "facing_ok": 0.4, "fps": 9.0, "detector_px": None, "swapped": None}]
     merged = {r["mode"]: r for r in mean_over_seeds(records)}
     assert merged["hybrid"] == {**base, "mode": "hybrid", "mpjpe_mm": 55.0, "A100": 0.8, "lost": 1.5,
-                                "facing_deg": 15.0, "facing_ok": 0.75, "fps": 7.0, "seeds": 2, "mpjpe_spread_mm": 30.0}
+                                "facing_deg": 15.0, "facing_ok": 0.75, "fps": 7.0, "detector_px": 5.0,
+                                "swapped": 0.25, "seeds": 2, "mpjpe_spread_mm": 30.0}
     assert merged["lift"]["seeds"] == 1 and merged["lift"]["mpjpe_spread_mm"] == 0.0
     assert merged["lift"]["facing_deg"] is None
+    assert merged["depth"]["mpjpe_mm"] is None and merged["depth"]["mpjpe_spread_mm"] is None, "a seed with no Δ"
+    assert merged["depth"]["lost"] == 11.0

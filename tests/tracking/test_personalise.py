@@ -39,7 +39,7 @@ def test_bone_energy_is_the_mean_length_difference_in_cm():
 
 
 def test_debiased_length_by_hand():
-    """m = 1.0, MAD = 0.1, so v = (1.4826 * 0.1)^2 and L = m - k v / (2 m); a spread too large
+    """m = 1.0, MAD = 0.05, so v = (1.4826 * 0.05)^2 and L = m - k v / (2 m); a spread too large
     for the first-order correction is capped at MAX_CORRECTION of m; no length: NaN."""
     lengths = np.array([0.9, 1.0, 1.1, np.nan, 1.05, 0.95])  # median 1.0, |deviations| .1 .1 .05 .05 0
     v = (1.4826 * 0.05) ** 2
@@ -214,6 +214,8 @@ def test_lift_bias_on_the_model_is_the_lifts_own_lengthening_on_the_observed_fra
     assert np.all(np.abs(diff) < 0.005), diff
     assert abs(diff.mean()) < 0.002, diff
     assert np.ptp(list(measured.values())) > 0.003  # the lift's error differs between limbs: not a trivial pass
+    zero = -np.array([measured[bone] for bone in LIMB_BONES])  # the same checks on a prediction of no bias
+    assert np.any(np.abs(zero) >= 0.005) or abs(zero.mean()) >= 0.002, f"no bias at all would pass: {zero}"
 
 
 @needs_assets
