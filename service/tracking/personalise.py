@@ -37,10 +37,10 @@ the male bodies and 1.1-1.5 % long on the female ones. So before the sweep and e
 lift is run on the current shape's own noise-free render at the key frames' poses
 (:func:`lift_bias`), and E_B's lengths are the observed ones less that bias: like E, E_B then
 compares what the sensor and the lift make of a body with what they made of the person. The bias
-is the current shape's, used for every candidate of the sweep or the round that follows (the
-start shape's for the sweep, whose genders are far from it: the bias flips sign between male and
-female bodies); calibrating each candidate would cost 1.5-2 s apiece. The energies of different
-rounds are therefore measured against different E_B targets.
+is each sweep candidate's own (its genders are far apart, and the bias flips sign between male
+and female bodies), then in each round the current shape's, used for every candidate of that
+round's shape PSO (calibrating each of its 272 candidates would cost 1.5-2 s apiece). The
+energies of different rounds are therefore measured against different E_B targets.
 
 The bodies scored are :meth:`~swarmpose.body.shape_space.ShapeSpace.fitting_body`: for MakeHuman,
 the tracking mesh moved out to enclose the full mesh's volume, which the decimation lowers by
@@ -355,8 +355,7 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
             key.pose = pose
         return energy_of(shaped)
 
-    calibrate(x)
-    x, first = _sweep(space, keys, refit, settings.sweep)
+    x, first = _sweep(space, keys, refit, settings.sweep, calibrate)
     if progress is not None:
         progress(f"sweep: start {', '.join(f'{k} {v:.3f}' for k, v in space.parameters(x).items())} "
                  f"(energy {first:.2f})")
@@ -380,11 +379,13 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
 
 
 def _sweep(space: ShapeSpace, keys: list[_KeyFrame], refit: Callable[[SkinnedBody], float],
-           grid: dict[str, tuple[float, ...]]) -> tuple[np.ndarray, float]:
+           grid: dict[str, tuple[float, ...]],
+           calibrate: Callable[[np.ndarray], None] = lambda x: None) -> tuple[np.ndarray, float]:
     """Stage 0: the start shape with each combination of ``grid``'s values ({parameter: values};
     parameters the space lacks are skipped), each with its own pose refit, so that poses tracked
-    with the start body do not tie the fit to it. Returns the best parameters and their energy;
-    the key frames keep the best candidate's poses."""
+    with the start body do not tie the fit to it; ``calibrate(x)`` is called before each
+    candidate's refit (E_B's lift bias of that candidate). Returns the best parameters and their
+    energy; the key frames keep the best candidate's poses."""
     import itertools
 
     axes = [(space.names.index(n), v) for n, v in grid.items() if n in space.names]
@@ -401,6 +402,7 @@ def _sweep(space: ShapeSpace, keys: list[_KeyFrame], refit: Callable[[SkinnedBod
     for x in candidates:
         for k, pose in zip(keys, initial):
             k.pose = pose
+        calibrate(x)
         energy = refit(space.fitting_body(x))
         if energy < best_energy:
             best, best_energy, best_poses = x, energy, [k.pose for k in keys]
