@@ -33,9 +33,6 @@
 #define NPIX (TW * TH)
 #define BACKGROUND 0 /* bits of 1/z = 0: nothing rendered */
 
-/* the one-work-item path scans and sets up triangles 8 at a time (include/raster.h) */
-#define VECTOR_RASTER (WG == 1 && VECROW)
-
 #if WG > 1 && !ZATOMIC
 #error "WG > 1 needs ZATOMIC=1"
 #endif
@@ -102,7 +99,7 @@ void score_particles(__global const float *hyp,       /* FK: P x POSE_DIM poses;
 {
     __local float4 lbones[NB * 3];
     __local float4 lverts[NV];
-#if !VECTOR_RASTER
+#if !VECROW
     __local short4 lspans[NV];
 #endif
     __local int zbuf[NPIX] __attribute__((aligned(32)));
@@ -149,20 +146,21 @@ void score_particles(__global const float *hyp,       /* FK: P x POSE_DIM poses;
     for (int v = lid; v < NV; v += WG) {
         const float4 q = project_tile(skin_lbs(lbones, rest[v], skin_idx[v], skin_w[v]), proj);
         lverts[v] = q;
-#if !VECTOR_RASTER
+#if !VECROW
         lspans[v] = vertex_span(q);
 #endif
     }
     barrier(CLK_LOCAL_MEM_FENCE);
 
-#if WG == 1
-    /* two passes: a branch-free scan keeps the triangles that may cover a pixel centre
-     * (on a CPU most of them are smaller than a tile pixel), then only those are drawn */
+    /* one work-item: two passes, a branch-free scan keeps the triangles that may cover a pixel
+     * centre (on a CPU most of them are smaller than a tile pixel), then only those are drawn;
+     * with VECROW (which implies WG == 1: it needs ZATOMIC=0) 8 triangles at a time */
+#if VECROW
     __local int lkeep[NF + 8];
-#if VECTOR_RASTER
     const int kept = keep_candidates(lverts, tris, lkeep);
     raster_kept(zbuf, lverts, tris, lkeep, kept);
-#else
+#elif WG == 1
+    __local int lkeep[NF + 8];
     int kept = 0;
     for (int t = 0; t < NF; ++t) {
         const int4 tri = tris[t];
@@ -175,7 +173,6 @@ void score_particles(__global const float *hyp,       /* FK: P x POSE_DIM poses;
         raster_triangle(zbuf, lverts[tri.x], lverts[tri.y], lverts[tri.z], lspans[tri.x], lspans[tri.y],
                         lspans[tri.z]);
     }
-#endif
 #else
     for (int t = lid; t < NF; t += WG) {
         const int4 tri = tris[t];

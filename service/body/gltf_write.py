@@ -19,6 +19,7 @@ import pygltflib as gl
 
 from swarmpose.body.gltf_format import COMPONENT_DTYPES, EXTRAS_KEY, FORMAT_NAME, FORMAT_VERSION, affine_inverse
 from swarmpose.body.kinematics import matrix_to_quaternion
+from swarmpose.body.parametric_sdf import vertex_normals
 from swarmpose.body.skeleton import JOINT_NAMES
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.errors import OutputError
@@ -34,17 +35,6 @@ def _node_transform(name: str, m: np.ndarray, children: list[int]) -> gl.Node:
                        rotation=[float(x), float(y), float(z), float(w)],
                        scale=None if np.allclose(scale, 1.0, atol=1e-9) else scale.tolist())
     return gl.Node(name=name, children=children, matrix=m.T.reshape(-1).tolist())
-
-
-def _vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Unit area-weighted vertex normals (V, 3); +Y for vertices in no triangle."""
-    tri = vertices[triangles]
-    face = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normals = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(normals, triangles[:, k], face)
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    return np.where(length > 1e-20, normals / np.where(length > 0, length, 1.0), [0.0, 1.0, 0.0])
 
 
 def _json_default(value):
@@ -102,7 +92,7 @@ def save_glb(body: SkinnedBody, path) -> Path:
     triangles = np.asarray(body.triangles, dtype=np.int64)
     attributes = gl.Attributes(
         POSITION=add(vertices.astype(np.float32), gl.FLOAT, gl.VEC3, gl.ARRAY_BUFFER, bounds=True),
-        NORMAL=add(_vertex_normals(vertices, triangles).astype(np.float32), gl.FLOAT, gl.VEC3, gl.ARRAY_BUFFER),
+        NORMAL=add(vertex_normals(vertices, triangles).astype(np.float32), gl.FLOAT, gl.VEC3, gl.ARRAY_BUFFER),
         JOINTS_0=add(np.asarray(body.skin_indices).astype(np.uint16), gl.UNSIGNED_SHORT, gl.VEC4, gl.ARRAY_BUFFER),
         WEIGHTS_0=add(np.asarray(body.skin_weights, dtype=np.float32), gl.FLOAT, gl.VEC4, gl.ARRAY_BUFFER),
     )

@@ -144,3 +144,15 @@ def signed_volume(verts: np.ndarray, faces: np.ndarray) -> float:
     """Signed volume (m^3) enclosed by triangles; > 0 when they wind counter-clockwise outside."""
     a, b, c = verts[faces[:, 0]], verts[faces[:, 1]], verts[faces[:, 2]]
     return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
+def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Unit area-weighted vertex normals (V, 3) of triangles (F, 3) over vertices (V, 3); +Y for
+    vertices in no triangle. They point the way the triangles wind (counter-clockwise: out)."""
+    tri = vertices[triangles]
+    face = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normals = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(normals, triangles[:, k], face)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    return np.where(length > 1e-20, normals / np.where(length > 0, length, 1.0), [0.0, 1.0, 0.0])

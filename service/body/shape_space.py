@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmpose.body.parametric_sdf import signed_volume
+from swarmpose.body.parametric_sdf import signed_volume, vertex_normals
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.errors import ConfigError
 
@@ -96,12 +96,8 @@ def match_volume(lod: SkinnedBody, full: SkinnedBody, iterations: int = 3) -> Sk
     outward = 1.0 if signed_volume(verts, tri) >= 0 else -1.0
     for _ in range(iterations):
         a, b, c = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]
-        face = outward * np.cross(b - a, c - a)  # (T, 3), length = twice the area
-        area = 0.5 * float(np.linalg.norm(face, axis=1).sum())
-        normal = np.zeros_like(verts)
-        for k in range(3):
-            np.add.at(normal, tri[:, k], face)
-        normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+        area = 0.5 * float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+        normal = outward * vertex_normals(verts, tri)
         verts = verts + (target - abs(signed_volume(verts, tri))) / max(area, 1e-12) * normal
     return replace(lod, vertices=verts.astype(np.asarray(lod.vertices).dtype))
 

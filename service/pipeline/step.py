@@ -145,7 +145,7 @@ class FramePipeline:
         """The body the tracker of ``body_id`` tracks with now (its locked shape once
         ``--personalize`` has fitted it), None where no tracker has that id."""
         if self.people is not None:
-            return next((t.tracker.body for t in self.people.tracks if t.id == body_id), None)
+            return self.people.body_of(body_id)
         if self.tracker is not None and self.tracker.body_id == body_id:
             return self.tracker.body
         return None

@@ -145,14 +145,13 @@ class BvhSink(FileSink):
         try:
             rows = self._written_rows()
             self.body, self.rig = body, body.rig
-            if self._poses is not None:
-                self._last = None
-                for k, (pose, to_bvh) in enumerate(self._poses):
-                    rows[k] = self._last = self._pose_row(pose, to_bvh)
-                if len(self._poses) < len(rows):
-                    log.warning("%s: the body changed after %d rows; the %d rows after the first %d keep their "
-                                "angles on the old skeleton", self.path, len(rows), len(rows) - len(self._poses),
-                                len(self._poses))
+            kept = self._poses or []
+            self._last = None
+            for k, (pose, to_bvh) in enumerate(kept):
+                rows[k] = self._last = self._pose_row(pose, to_bvh)
+            if len(kept) < len(rows):
+                log.warning("%s: the body changed after %d rows; the %d rows after the first %d keep their "
+                            "angles on the old skeleton", self.path, len(rows), len(rows) - len(kept), len(kept))
             head = self._header(self.fps)
             with open(temporary, "wb") as out:
                 out.write(head.replace(f"Frames: {0:<{FRAMES_WIDTH}d}", f"Frames: {len(rows):<{FRAMES_WIDTH}d}")
@@ -165,7 +164,7 @@ class BvhSink(FileSink):
                 if temporary.is_file():
                     temporary.unlink()
             raise write_error(self.what, self.path, exc) from exc
-        old, self._poses = self._file, None  # the body is final now: nothing more to keep
+        old = self._file  # the poses stay kept: the body may change again (a new person's fit)
         try:
             old.close()
             self._file = open(self.path, "r+b")

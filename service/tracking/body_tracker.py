@@ -72,11 +72,12 @@ def recheck_due(index: int, age: int, every: int) -> bool:
     return bool(every) and (index % every == 0 or age in YOUNG_RECHECKS)
 
 
-def root_turn_deg(a: np.ndarray, b: np.ndarray) -> float:
-    """The angle (degrees) of the rotation between the root orientations of poses a and b (36,)
-    (unit or not: the quaternions are normalised)."""
-    qa, qb = a[3:7] / np.linalg.norm(a[3:7]), b[3:7] / np.linalg.norm(b[3:7])
-    return float(np.degrees(2.0 * np.arccos(np.clip(abs(float(qa @ qb)), 0.0, 1.0))))
+def root_turn_deg(a: np.ndarray, b: np.ndarray) -> float | np.ndarray:
+    """The angle (degrees) of the rotation between the root orientations of pose a (36,) and
+    pose b (36,), or of each of poses b (P, 36) (unit or not: the quaternions are normalised)."""
+    qa, qb = a[3:7] / np.linalg.norm(a[3:7]), b[..., 3:7] / np.linalg.norm(b[..., 3:7], axis=-1, keepdims=True)
+    turn = np.degrees(2.0 * np.arccos(np.clip(np.abs(qb @ qa), 0.0, 1.0)))
+    return float(turn) if turn.ndim == 0 else turn
 
 
 def observed_depth(depth: np.ndarray) -> np.ndarray:
@@ -267,17 +268,17 @@ class BodyTracker:
         if root_turn_deg(self.previous, best) <= REPLACED_TURN_DEG:
             self.challenger = None
             return best
-        own = [k for k, pose in enumerate(result.personal_bests)
-               if root_turn_deg(self.previous, pose) <= REPLACED_TURN_DEG and np.isfinite(result.personal_values[k])]
         again = self.challenger is not None and root_turn_deg(self.challenger, best) <= REPLACED_TURN_DEG
-        if again or not own:  # the same challenger won twice (or nothing is left of the track)
+        own = np.flatnonzero((root_turn_deg(self.previous, result.personal_bests) <= REPLACED_TURN_DEG)
+                             & np.isfinite(result.personal_values))
+        if again or not own.size:  # the same challenger won twice (or nothing is left of the track)
             self.challenger = None
             self.history.clear()  # the old track's poses are no seeds for the new one
             if self.filter is not None:  # nor are they to be smoothed into the new one
                 self.filter.reset()
             return best
         self.challenger = best
-        return result.personal_bests[min(own, key=lambda k: result.personal_values[k])].copy()
+        return result.personal_bests[own[np.argmin(result.personal_values[own])]].copy()
 
     def _filtered(self, result: BodyResult, time_s: float) -> BodyResult:
         """``result`` with its pose through :attr:`filter` and the joints of that pose; the search's own

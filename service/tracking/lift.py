@@ -52,19 +52,23 @@ def sample_surface_depth(depth: np.ndarray, u: float, v: float, window_px: int, 
 
 
 def lift_keypoints(depth: np.ndarray, intrinsics: Intrinsics, points: dict[str, tuple[float, float, float]],
-                   window_m: float = LIFT_WINDOW_M, max_spread_m: float = 0.7) -> dict[str, np.ndarray]:
+                   window_m: float = LIFT_WINDOW_M, max_spread_m: float = 0.7,
+                   typical_depth: float | None = None) -> dict[str, np.ndarray]:
     """J^e: body point -> (3,) camera-frame position (m) or NaNs, for 2D points {name: (x, y, score)}.
 
     A lift more than ``max_spread_m`` in depth from the median of the lifts (with at least
     three) is dropped: its keypoint slipped off the silhouette onto the background.
 
-    depth: (H, W) float m, 0 = invalid, at the intrinsics' size.
+    depth: (H, W) float m, 0 = invalid, at the intrinsics' size; typical_depth: the depth (m) at
+    which the window is ``window_m`` wide (None: the median of ``depth``'s valid pixels).
     """
     out: dict[str, np.ndarray] = {}
     if not points:
         return out
-    valid = depth[np.isfinite(depth) & (depth > 0)]
-    typical = float(np.median(valid)) if valid.size else 3.0
+    if typical_depth is None:
+        valid = depth[np.isfinite(depth) & (depth > 0)]
+        typical_depth = float(np.median(valid)) if valid.size else 3.0
+    typical = typical_depth
     for name, (x, y, _score) in points.items():
         window = max(3, int(round(window_m * intrinsics.fx / typical)))
         z = sample_surface_depth(depth, x, y, window)

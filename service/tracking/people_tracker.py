@@ -36,6 +36,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from swarmpose.body.skinned import SkinnedBody
 from swarmpose.detect.per_person import PersonDetection
 from swarmpose.sources.base import Frame
 from swarmpose.tracking.association import NO_PAIR, Assignment, assign, colour_histogram, pair_costs
@@ -139,6 +140,10 @@ class PeopleTracker:
         """Each current track's personalisation state (``--personalize``; empty without)."""
         states = (t.tracker.personalisation() for t in self.tracks)
         return [s for s in states if s is not None]
+
+    def body_of(self, body_id: int) -> SkinnedBody | None:
+        """The body the track ``body_id`` is tracked with now (None: no such track)."""
+        return next((t.tracker.body for t in self.tracks if t.id == body_id), None)
 
     def _release(self, tracker: BodyTracker) -> None:
         tracker.new_person()  # a parked tracker keeps nothing of its person (a --personalize fit)

@@ -71,10 +71,11 @@ from swarmpose.detect.joints import Joints2D
 from swarmpose.gpu.context import ClContext
 from swarmpose.gpu.reference import raycast_tiles
 from swarmpose.gpu.scorer import ParticleScorer
+from swarmpose.gpu.tile import TileBox
 from swarmpose.sources.base import Frame
 from swarmpose.tracking.body_tracker import BodyTracker, observed_depth
 from swarmpose.tracking.config import TrackerConfig
-from swarmpose.tracking.lift import LIFT_WINDOW_M, lift_keypoints
+from swarmpose.tracking.lift import lift_keypoints
 from swarmpose.tracking.objective import JointTargets, Objective
 from swarmpose.tracking.pso import PsoConfig, minimise
 
@@ -195,33 +196,34 @@ def model_depth(body: SkinnedBody, pose: np.ndarray, intrinsics: Intrinsics) -> 
     """The depth (H, W) float32 m (0: no hit) of ``body`` at ``pose`` (36,), without noise: one ray
     per pixel centre (OpenCV, as :meth:`Intrinsics.project`) cast at the dual-quaternion-skinned mesh."""
     verts = body.pose(np.asarray(pose, float)[None], "dqs")
-    u, v = np.meshgrid(np.arange(intrinsics.width), np.arange(intrinsics.height))
-    rays = np.zeros((intrinsics.height, intrinsics.width, 6), np.float32)
-    rays[..., 3] = (u - intrinsics.cx) / intrinsics.fx
-    rays[..., 4] = (v - intrinsics.cy) / intrinsics.fy
-    rays[..., 5] = 1.0  # unit z: the hit distance is the depth
-    return raycast_tiles(verts, np.asarray(body.triangles), rays)[0]
+    w, h = intrinsics.width, intrinsics.height
+    return raycast_tiles(verts, np.asarray(body.triangles), TileBox(0, 0, w, h, w, h).rays(intrinsics))[0]
 
 
-def lift_bias(body: SkinnedBody, poses: Sequence[np.ndarray], frames: Sequence[Frame], intrinsics: Intrinsics
-              ) -> dict[tuple[str, str], float]:
+def typical_depth(frame: Frame) -> float | None:
+    """The median (m) of ``frame``'s valid depth, the lift's ``typical_depth`` on it (None: no depth)."""
+    observed = observed_depth(frame.depth)
+    return float(np.median(observed[observed > 0])) if np.any(observed > 0) else None
+
+
+def lift_bias(body: SkinnedBody, poses: Sequence[np.ndarray], typical: Sequence[float | None],
+              intrinsics: Intrinsics) -> dict[tuple[str, str], float]:
     """How much the lift lengthens each :data:`LIMB_BONES` pair on ``body`` itself (m, median over
     the frames): the body's own joints at each pose (36,), projected without noise and lifted
     (:func:`~swarmpose.tracking.lift.lift_keypoints`) on its own rendered depth
-    (:func:`model_depth`), minus the rest length. Each frame's window is the one the lift used on
-    the observed ``frames`` (same pixels, whatever the background). Pairs never lifted are left out."""
+    (:func:`model_depth`), minus the rest length. ``typical``: each frame's :func:`typical_depth`,
+    so that the lift's window is the one it used on the observed frame (same pixels, whatever the
+    background; None: the frame is skipped). Pairs never lifted are left out."""
     names = sorted({n for bone in LIMB_BONES for n in bone})
     seen: dict[tuple[str, str], list[float]] = {b: [] for b in LIMB_BONES}
-    for pose, frame in zip(poses, frames):
+    for pose, frame_depth in zip(poses, typical):
         depth = model_depth(body, pose, intrinsics)
-        observed = observed_depth(frame.depth)
-        if not np.any(depth > 0) or not np.any(observed > 0):
+        if frame_depth is None or not np.any(depth > 0):
             continue
-        window = LIFT_WINDOW_M * float(np.median(depth[depth > 0])) / float(np.median(observed[observed > 0]))
         points = body.posed_points(np.asarray(pose, float)[None], names)[0]
         uv = intrinsics.project(points)
         lifted = lift_keypoints(depth, intrinsics, {n: (float(x), float(y), 1.0) for n, (x, y) in zip(names, uv)},
-                                window_m=window)
+                                typical_depth=frame_depth)
         for a, b in LIMB_BONES:
             if np.all(np.isfinite(lifted[a])) and np.all(np.isfinite(lifted[b])):
                 seen[(a, b)].append(float(np.linalg.norm(lifted[a] - lifted[b])))
@@ -320,13 +322,14 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
 
     observed = observed_bone_lengths(usable, body, intrinsics, config.min_score) if settings.bone_weight > 0 else {}
     bones = dict(observed)
+    typical = [typical_depth(k.sample.frame) for k in keys]  # the frames' own: the same for every shape
 
     def calibrate(x_now: np.ndarray) -> None:
         """E_B's lengths: the observed ones less the lift's bias on the full body of ``x_now`` at
         the key frames' current poses (see the module docstring)."""
         if not (observed and settings.debias_lift):
             return
-        bias = lift_bias(space.full_body(x_now), [k.pose for k in keys], [k.sample.frame for k in keys], intrinsics)
+        bias = lift_bias(space.full_body(x_now), [k.pose for k in keys], typical, intrinsics)
         bones.update({bone: length - bias.get(bone, 0.0) for bone, length in observed.items()})
         if progress is not None:
             progress("lift bias: " + ", ".join(f"{a.replace('left_', 'L ').replace('right_', 'R ')}-"
@@ -360,7 +363,6 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
         progress(f"sweep: start {', '.join(f'{k} {v:.3f}' for k, v in space.parameters(x).items())} "
                  f"(energy {first:.2f})")
     energies: list[float] = [first]
-    body = space.fitting_body(x)
     for round_ in range(settings.rounds):
         calibrate(x)
         start = np.clip(x + rng.normal(0.0, 0.15 / (1 + round_), (pso.particles, len(x))) * span,
@@ -368,8 +370,7 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
         start[0] = x
         best = minimise(shape_energy, start, space.lower, space.upper, rng, pso)
         x = space.clip(best.best)
-        body = space.fitting_body(x)
-        energies.append(refit(body))
+        energies.append(refit(space.fitting_body(x)))
         if progress is not None:
             progress(f"round {round_ + 1}/{settings.rounds}: energy {best.value:.2f}, "
                      + ", ".join(f"{k} {v:.3f}" for k, v in space.parameters(x).items()))

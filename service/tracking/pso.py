@@ -78,8 +78,8 @@ class PsoResult:
     value: float
     history: np.ndarray
     evaluations: int
-    personal_bests: np.ndarray | None = None
-    personal_values: np.ndarray | None = None
+    personal_bests: np.ndarray
+    personal_values: np.ndarray
 
 
 def _step_within(x: np.ndarray, v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

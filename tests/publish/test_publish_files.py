@@ -263,6 +263,26 @@ def test_bvh_rewritten_for_a_new_body_animates_it_from_the_first_frame(tmp_path,
     assert not path.with_name("poses.bvh.tmp").exists()
 
 
+@needs_assets
+def test_a_bvh_whose_body_changes_twice_animates_the_last_body_throughout(tmp_path):
+    """--personalize gives a new person the start body back and fits again: after a second
+    change every row, those before the first change too, is recomputed on the last body's rig
+    (MakeHuman shapes differ in their rest frames, so rows left on an earlier rig would move)."""
+    male, short = load_body(f"makehuman:{MAKEHUMAN}", "male"), load_body(f"makehuman:{MAKEHUMAN}", "female-short")
+    poses = camera_poses(male, "walk", 6)
+    path = tmp_path / "poses.bvh"
+    sink = BvhSink(path, male, may_change=True)
+    for k, h in enumerate(poses):
+        if k == 2:
+            assert sink.use_body(short)
+        if k == 4:
+            assert sink.use_body(male)
+        sink.frame(message(k, [entry(k, h)]), None)
+    sink.close()
+    _, on_male = forward_kinematics(male.rig, poses)
+    np.testing.assert_allclose(own_positions(path, male.bone_names), on_male * TO_BVH, atol=1e-3)
+
+
 def test_a_failed_bvh_rewrite_leaves_the_file_and_the_sink_as_they_were(tmp_path, builtin_body):
     """The temporary file cannot be written (a folder in its way): use_body raises OutputError,
     the file, its skeleton and the sink's body are unchanged, rows go on; once the way is clear

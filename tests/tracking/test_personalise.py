@@ -192,7 +192,7 @@ def test_lift_bias_on_the_model_is_the_lifts_own_lengthening_on_the_observed_fra
     from swarmpose.sources.registry import open_source
     from swarmpose.tracking.body_tracker import observed_depth
     from swarmpose.tracking.lift import lift_keypoints
-    from swarmpose.tracking.personalise import LIMB_BONES, lift_bias
+    from swarmpose.tracking.personalise import LIMB_BONES, lift_bias, typical_depth
 
     body = load_body(f"makehuman:{MAKEHUMAN}", "male-tall")
     truth = [json.loads(line) for line in (tall_walk / "groundtruth.jsonl").read_text().splitlines()]
@@ -208,7 +208,7 @@ def test_lift_bias_on_the_model_is_the_lifts_own_lengthening_on_the_observed_fra
             if np.all(np.isfinite(lifted[a])) and np.all(np.isfinite(lifted[b])):
                 seen[(a, b)].append(np.linalg.norm(lifted[a] - lifted[b]))
     measured = {(a, b): np.median(v) - np.linalg.norm(body.point(a) - body.point(b)) for (a, b), v in seen.items()}
-    predicted = lift_bias(body, poses, frames, frames[0].intrinsics)
+    predicted = lift_bias(body, poses, [typical_depth(f) for f in frames], frames[0].intrinsics)
     assert set(predicted) == set(LIMB_BONES)
     diff = np.array([predicted[bone] - measured[bone] for bone in LIMB_BONES])
     assert np.all(np.abs(diff) < 0.005), diff
