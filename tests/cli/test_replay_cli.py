@@ -9,7 +9,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import av
@@ -19,6 +18,7 @@ from conftest import REPO, free_port
 
 from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.cli.main import main
+from swarmpose.core.polling import wait_until
 from swarmpose.motion.bvh import read_bvh
 from swarmpose.sources.groundtruth import load_ground_truth
 
@@ -82,10 +82,9 @@ def test_serve_with_the_example_subscriber_beside_it(wave_sequence, tmp_path):
                               "--rate", "5", "--loop", "--health-file", str(health), "--status-period", "0.3"],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + 60
-        while not (health.exists() and json.loads(health.read_text())["frames"]["published"] > 0):
-            assert time.monotonic() < deadline and serve.poll() is None, "the worker did not start"
-            time.sleep(0.2)
+        published = wait_until(lambda: serve.poll() is not None or (
+            health.exists() and json.loads(health.read_text())["frames"]["published"] > 0), timeout=60, step=0.2)
+        assert published and serve.poll() is None, "the worker did not start"
         sub = subprocess.run([sys.executable, str(REPO / "examples" / "subscribe.py"), "--connect", endpoint,
                               "--no-multicast", "--count", "4"], capture_output=True, text=True, timeout=120)
         assert sub.returncode == 0, sub.stderr
@@ -119,10 +118,9 @@ def test_replay_stopped_by_a_signal_exits_130_keeping_what_it_tracked(wave_seque
                                "lift", "--rate", "2", "--no-overlay", "--quiet"],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + 60
-        while not ((out / "poses.jsonl").exists() and (out / "poses.jsonl").read_text()):
-            assert time.monotonic() < deadline and replay.poll() is None, "replay did not start"
-            time.sleep(0.05)
+        wrote = wait_until(lambda: replay.poll() is not None or (
+            (out / "poses.jsonl").exists() and (out / "poses.jsonl").read_text()), timeout=60)
+        assert wrote and replay.poll() is None, "replay did not start"
         replay.send_signal(signal.SIGINT)
         assert replay.wait(timeout=30) == 130
     finally:

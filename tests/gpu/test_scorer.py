@@ -354,7 +354,9 @@ def test_work_group_variants_agree(builtin_body, seed):
     box = person_box(builtin_body, h)
     for tile in ((32, 24), (36, 28)):
         results = []
-        for kw in ({}, {"local_size": 32}, {"atomic": True}, {"vector_raster": False}):
+        # vector_raster=False is the default path where the width is no multiple of 8: only at 32
+        scalar = ({"vector_raster": False},) if tile[0] % 8 == 0 else ()
+        for kw in ({}, {"local_size": 32}, {"atomic": True}) + scalar:
             sc = ParticleScorer(builtin_body, INTR, tile, context="cpu", **kw)
             sc.set_observation(depth, box)
             results.append(sc.render_and_score(h))
