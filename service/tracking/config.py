@@ -53,6 +53,9 @@ class TrackerConfig:
                                       "(detectors swap sides on people seen from behind)")
     penetration: float = setting(1.0, "w_P: cost per cm of an elbow or wrist inside the torso (0 = off)",
                                  minimum=0.0)
+    arm_prior: float = setting(0.0, "w_A: cost per rad² of the arms' angles away from the rest pose (0 = off; 1 "
+                                    "helps cameras that see people side on, costs views from behind)",
+                               minimum=0.0)
     smoothing: str = setting("off", "smooth the published poses: off (as in evaluation) or one-euro (a One-Euro "
                                     "filter; the search itself always starts from the unfiltered pose)",
                              choices=SMOOTHING)
@@ -93,4 +96,5 @@ class TrackerConfig:
         return ObjectiveWeights(depth=w_d if self.depth_weight is None else self.depth_weight,
                                 joints=w_j if self.joints_weight is None else self.joints_weight,
                                 alpha=self.alpha, threshold_m=self.threshold_m, min_score=self.min_score,
-                                label_swaps=self.label_swaps, penetration=self.penetration)
+                                label_swaps=self.label_swaps, penetration=self.penetration,
+                                arm_prior=self.arm_prior)

@@ -23,6 +23,15 @@ sweep in BENCHMARKS.md):
   wrists sink into the torso's core, a capsule from the hips' middle to the shoulders'
   middle; w_P = 1 (``penetration`` setting, 0 = off). Not in the paper: nothing else keeps
   an occluded arm out of the trunk.
+* ``E_A`` in **rad²** (:meth:`Objective.arm_prior_rad2`; not in the paper, off by default): the
+  squared distance of both arms' shoulder (roll, pitch, yaw) and elbow angles from the body's
+  rest angles, weight w_A (``arm_prior`` setting, 0 = off). Seen from the side, an arm that
+  hangs over the torso or points at the camera is missed by the detector and hardly shows in
+  the depth tile, and the search left it raised or swung out where nothing contradicts it; a
+  weak pull to the rest pose puts it where an unobserved arm usually is. Measured over the
+  benchmark matrix (two seeds, w_A = 1): side views 92 → 76 mm, but views from behind 41 →
+  49 mm and UTD-MHAD's lost frames 59 → 101, so it stays off unless a camera sees people
+  side on (BENCHMARKS.md, issue 12, fifth part).
 * Left/right label swaps of the detector (common on people seen from behind or the side):
   with ``label_swaps``, each detected left/right pair (shoulders, elbows, ..., ears) is
   matched to the model's pair in the better of the two assignments, the crossed one at a
@@ -38,7 +47,7 @@ from functools import cached_property
 
 import numpy as np
 
-from swarmpose.body.skeleton import joint_weight
+from swarmpose.body.skeleton import angle_offset, joint_weight
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError
@@ -58,6 +67,10 @@ SPENT_KEYS = ("score", "joints", "calls")
 ARM_POINTS = ("left_elbow", "right_elbow", "left_wrist", "right_wrist")
 """The points :attr:`Objective.penetration_cm` keeps out of the torso."""
 
+ARM_PRIOR_COLUMNS = np.array([7 + angle_offset(f"{side}_shoulder") + k for side in ("left", "right") for k in range(3)]
+                             + [7 + angle_offset(f"{side}_elbow") for side in ("left", "right")])
+"""The pose columns (36-D) of both shoulders' three and both elbows' angle, which E_A pulls to rest."""
+
 TORSO_RADIUS_SHARE = 0.4
 """The torso's core, kept free of elbows and wrists, is a capsule from the hips' middle to the
 shoulders' middle of radius this share of the distance between the hip joints (about 7.5 cm
@@ -68,7 +81,7 @@ on an adult): only arms clearly inside the trunk pay."""
 class ObjectiveWeights:
     """w_D, w_J, α, the clamp T (m), the lowest detection score a joint needs, whether
     detected left/right pairs may match the model crossed, and w_P (per cm of an elbow or
-    wrist inside the torso)."""
+    wrist inside the torso), w_A (per rad² of the arms' angles away from the rest pose)."""
 
     depth: float = 3.0
     joints: float = 1.0
@@ -77,9 +90,10 @@ class ObjectiveWeights:
     min_score: float = 0.3
     label_swaps: bool = True
     penetration: float = 1.0
+    arm_prior: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("depth", "joints", "threshold_m", "penetration"):
+        for name in ("depth", "joints", "threshold_m", "penetration", "arm_prior"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ConfigError(f"objective weight {name} must be finite and >= 0, got {value}")
@@ -175,7 +189,7 @@ class Objective:
     """E(h, o) for batches of poses on one frame.
 
     Per frame call :meth:`set_frame`; then ``objective(h)`` returns E (P,) and
-    :attr:`last_parts` holds E_D, E_J2D, E_J3D, E_J, E_P (P,) of the last call. One launch of
+    :attr:`last_parts` holds E_D, E_J2D, E_J3D, E_J, E_P, E_A (P,) of the last call. One launch of
     the scorer computes all the terms (forward kinematics, the depth term, and the joint and
     penetration terms from the named points, cl/include/joint_term.h); :meth:`host_terms` is
     the numpy oracle of the latter. :attr:`spent_s` accumulates where the calls' time went (s):
@@ -265,6 +279,12 @@ class Objective:
     def uses_joints(self) -> bool:
         return self.weights.joints > 0 and self.targets.count > 0
 
+    def arm_prior_rad2(self, h: np.ndarray) -> np.ndarray:
+        """(P,) rad²: E_A of poses h (P, 36), the squared distance of the arms' angles
+        (:data:`ARM_PRIOR_COLUMNS`) from the body's rest angles."""
+        rest = self.body.rest_angles[ARM_PRIOR_COLUMNS - 7]
+        return ((np.asarray(h, float)[:, ARM_PRIOR_COLUMNS] - rest) ** 2).sum(axis=1)
+
     def penetration_cm(self, points: np.ndarray) -> np.ndarray:
         """(P,) cm: summed depth of the elbows and wrists inside the torso's core (see
         :data:`TORSO_RADIUS_SHARE`) for the body's named points (P, NPT, 3) m (numpy oracle of
@@ -337,8 +357,9 @@ class Objective:
         e_2d, e_3d = (result.terms["E_J2D"], result.terms["E_J3D"]) if self.uses_joints else (zeros, zeros)
         e_j = w.alpha * e_2d + (1.0 - w.alpha) * e_3d
         e_p = result.terms["E_P"] if w.penetration > 0 else zeros
-        total = w.depth * e_d + w.joints * e_j + w.penetration * e_p
-        self.last_parts = {"E": total, "E_D": e_d, "E_J": e_j, "E_J2D": e_2d, "E_J3D": e_3d, "E_P": e_p}
+        e_a = self.arm_prior_rad2(h) if w.arm_prior > 0 else zeros
+        total = w.depth * e_d + w.joints * e_j + w.penetration * e_p + w.arm_prior * e_a
+        self.last_parts = {"E": total, "E_D": e_d, "E_J": e_j, "E_J2D": e_2d, "E_J3D": e_3d, "E_P": e_p, "E_A": e_a}
         self.last_counts = result.counts
         spent = self.spent_s
         spent["score"] += t1 - t0

@@ -162,6 +162,30 @@ def test_penetration_is_the_depth_of_elbows_and_wrists_inside_the_torso_core(bod
     assert got[0] == 0.0 and np.sum(np.array(want) > 1.0) >= 3, "some random poses sink an arm into the trunk"
 
 
+def test_arm_prior_is_the_squared_distance_of_the_arm_angles_from_rest(body):
+    """By hand: the rest pose pays nothing, a leg or the spine moved pays nothing, the left
+    shoulder's roll 0.5 rad and the right elbow 0.3 rad from rest pay (0.25 + 0.09)·w_A."""
+    from swarmpose.body.skeleton import angle_offset
+
+    rest = body.rest_pose((0.0, 0.0, 2.5), (0.0, 1.0, 0.0, 0.0))
+    legs = rest.copy()
+    legs[7 + angle_offset("left_knee")] -= 0.8
+    legs[7 + angle_offset("spine")] += 0.2
+    arms = rest.copy()
+    arms[7 + angle_offset("left_shoulder")] += 0.5
+    arms[7 + angle_offset("right_elbow")] += 0.3
+    hs = np.stack([rest, legs, arms])
+    scorer = ParticleScorer(body, INTR, (32, 32))
+    off = Objective(body, INTR, scorer)
+    on = Objective(body, INTR, scorer, ObjectiveWeights(arm_prior=2.0))
+    np.testing.assert_allclose(on.arm_prior_rad2(hs), [0.0, 0.0, 0.34], atol=1e-12)
+    np.testing.assert_allclose(on(hs) - off(hs), [0.0, 0.0, 0.68], atol=1e-9)
+    np.testing.assert_allclose(on.last_parts["E_A"], [0.0, 0.0, 0.34], atol=1e-12)
+    assert np.all(off.last_parts["E_A"] == 0.0), "off by default"
+    with pytest.raises(ConfigError):
+        ObjectiveWeights(arm_prior=-1.0)
+
+
 def test_bad_weights():
     with pytest.raises(ConfigError):
         ObjectiveWeights(depth=0.0, joints=0.0)

@@ -71,7 +71,7 @@ def test_hybrid_tracks_the_walk_without_initialisation(body, sequence):
     message = FrameResult(FRAMES - 1, 0, (results[-1],)).to_message("cam0")
     line = json.dumps(message, allow_nan=False)
     assert validate(json.loads(line))["bodies"][0]["state"] == "tracking"
-    assert set(results[-1].objective) == {"E", "E_D", "E_J", "E_J2D", "E_J3D", "E_P"}
+    assert set(results[-1].objective) == {"E", "E_D", "E_J", "E_J2D", "E_J3D", "E_P", "E_A"}
 
 
 def test_seeded_runs_repeat(body, sequence):
