@@ -53,8 +53,8 @@ class TrackerConfig:
                                       "(detectors swap sides on people seen from behind)")
     penetration: float = setting(1.0, "w_P: cost per cm of an elbow or wrist inside the torso (0 = off)",
                                  minimum=0.0)
-    arm_prior: float = setting(0.0, "w_A: cost per rad² of the arms' angles away from the rest pose (0 = off; 1 "
-                                    "helps cameras that see people side on, costs views from behind)",
+    arm_prior: float = setting(0.0, "w_A: cost per rad² of the arms' angles away from the rest pose, times how "
+                                    "side on the person stands (0 = off; 1 holds the arms a side view hides)",
                                minimum=0.0)
     smoothing: str = setting("off", "smooth the published poses: off (as in evaluation) or one-euro (a One-Euro "
                                     "filter; the search itself always starts from the unfiltered pose)",

@@ -23,15 +23,17 @@ sweep in BENCHMARKS.md):
   wrists sink into the torso's core, a capsule from the hips' middle to the shoulders'
   middle; w_P = 1 (``penetration`` setting, 0 = off). Not in the paper: nothing else keeps
   an occluded arm out of the trunk.
-* ``E_A`` in **rad²** (:meth:`Objective.arm_prior_rad2`; not in the paper, off by default): the
-  squared distance of both arms' shoulder (roll, pitch, yaw) and elbow angles from the body's
-  rest angles, weight w_A (``arm_prior`` setting, 0 = off). Seen from the side, an arm that
-  hangs over the torso or points at the camera is missed by the detector and hardly shows in
-  the depth tile, and the search left it raised or swung out where nothing contradicts it; a
-  weak pull to the rest pose puts it where an unobserved arm usually is. Measured over the
-  benchmark matrix (two seeds, w_A = 1): side views 92 → 76 mm, but views from behind 41 →
-  49 mm and UTD-MHAD's lost frames 59 → 101, so it stays off unless a camera sees people
-  side on (BENCHMARKS.md, issue 12, fifth part).
+* ``E_A`` in **rad²** (:meth:`Objective.arm_prior_rad2`; not in the paper): the squared
+  distance of both arms' shoulder (roll, pitch, yaw) and elbow angles from the body's rest
+  angles, weight w_A (``arm_prior`` setting; 0 = off, the default) times how side on the
+  reference pose stands (:meth:`Objective.side_on_share`: 0 facing the camera or turned
+  away, 1 side on). Seen from the side, an arm that hangs over the torso or points at the
+  camera is missed by the detector and hardly shows in the depth tile, and the search left
+  it raised or swung out where nothing contradicts it; a weak pull to the rest pose puts it
+  where an unobserved arm usually is. Unscaled, the pull helped the side views and cost the
+  views from behind (a facing decision tipped) and real arm motions; scaled, the matrix and
+  UTD-MHAD gained, but the regression subset's jumping jacks from behind (p = g = 32) missed
+  its bound, so it is opt-in (BENCHMARKS.md, issue 12, fifth part).
 * Left/right label swaps of the detector (common on people seen from behind or the side):
   with ``label_swaps``, each detected left/right pair (shoulders, elbows, ..., ears) is
   matched to the model's pair in the better of the two assignments, the crossed one at a
@@ -47,6 +49,7 @@ from functools import cached_property
 
 import numpy as np
 
+from swarmpose.body.kinematics import quaternion_to_matrix
 from swarmpose.body.skeleton import angle_offset, joint_weight
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
@@ -214,6 +217,7 @@ class Objective:
         self.normaliser = 1.0
         self.coarse_normaliser = 1.0
         self.has_depth = False
+        self.arm_prior_scale = 1.0
         self.last_parts: dict[str, np.ndarray] = {}
         self.last_counts: dict[str, np.ndarray] = {}
         self.spent_s = dict.fromkeys(SPENT_KEYS, 0.0)
@@ -255,6 +259,13 @@ class Objective:
             if scorer is self.scorer:
                 self.has_depth = observed > 0
         self.normaliser, self.coarse_normaliser = normalisers[0], normalisers[-1]
+        self.set_reference(reference)
+
+    def set_reference(self, pose: np.ndarray) -> None:
+        """Weigh E_A by how side on ``pose`` (36,), the pose the search starts around, stands
+        (:meth:`side_on_share`); :meth:`set_frame` calls it. An objective that never had a
+        frame or a reference (the start's joint-term-only stage) weighs E_A in full."""
+        self.arm_prior_scale = self.side_on_share(pose)
 
     def set_targets(self, targets: JointTargets) -> None:
         """The frame's joint targets alone: all a joint-term-only objective (w_D = 0) needs."""
@@ -278,6 +289,16 @@ class Objective:
     @property
     def uses_joints(self) -> bool:
         return self.weights.joints > 0 and self.targets.count > 0
+
+    def side_on_share(self, pose: np.ndarray) -> float:
+        """|sin| of the angle between the body's forward axis and the line of sight to its root
+        for a pose (36,): 0 facing the camera or turned away, 1 side on (E_A's scale). The
+        measured form: a line of sight tilted up or down counts too (a person close below the
+        camera reads as partly side on); a turn-only variant measured worse (BENCHMARKS.md)."""
+        h = np.asarray(pose, float)
+        sight = h[:3] / max(float(np.linalg.norm(h[:3])), 1e-9)
+        cos = float(quaternion_to_matrix(h[3:7])[:, 2] @ sight)
+        return float(np.sqrt(max(1.0 - cos * cos, 0.0)))
 
     def arm_prior_rad2(self, h: np.ndarray) -> np.ndarray:
         """(P,) rad²: E_A of poses h (P, 36), the squared distance of the arms' angles
@@ -358,7 +379,7 @@ class Objective:
         e_j = w.alpha * e_2d + (1.0 - w.alpha) * e_3d
         e_p = result.terms["E_P"] if w.penetration > 0 else zeros
         e_a = self.arm_prior_rad2(h) if w.arm_prior > 0 else zeros
-        total = w.depth * e_d + w.joints * e_j + w.penetration * e_p + w.arm_prior * e_a
+        total = w.depth * e_d + w.joints * e_j + w.penetration * e_p + w.arm_prior * self.arm_prior_scale * e_a
         self.last_parts = {"E": total, "E_D": e_d, "E_J": e_j, "E_J2D": e_2d, "E_J3D": e_3d, "E_P": e_p, "E_A": e_a}
         self.last_counts = result.counts
         spent = self.spent_s

@@ -18,7 +18,7 @@ from swarmpose.sim.evaluate import facing_errors_deg
 from swarmpose.sim.render import Renderer, Room
 from swarmpose.tracking.init_pose import torso_pose, turned
 from swarmpose.tracking.lift import JOINT_RADIUS, lift_keypoints
-from swarmpose.tracking.objective import SWAP_COST, JointTargets, Objective, ObjectiveWeights
+from swarmpose.tracking.objective import ARM_PRIOR_COLUMNS, SWAP_COST, JointTargets, Objective, ObjectiveWeights
 
 INTR = Intrinsics.kinect_v1()
 FACING = (0.0, 1.0, 0.0, 0.0)
@@ -176,14 +176,46 @@ def test_arm_prior_is_the_squared_distance_of_the_arm_angles_from_rest(body):
     arms[7 + angle_offset("right_elbow")] += 0.3
     hs = np.stack([rest, legs, arms])
     scorer = ParticleScorer(body, INTR, (32, 32))
-    off = Objective(body, INTR, scorer)
+    off = Objective(body, INTR, scorer, ObjectiveWeights(arm_prior=0.0))
     on = Objective(body, INTR, scorer, ObjectiveWeights(arm_prior=2.0))
     np.testing.assert_allclose(on.arm_prior_rad2(hs), [0.0, 0.0, 0.34], atol=1e-12)
     np.testing.assert_allclose(on(hs) - off(hs), [0.0, 0.0, 0.68], atol=1e-9)
     np.testing.assert_allclose(on.last_parts["E_A"], [0.0, 0.0, 0.34], atol=1e-12)
-    assert np.all(off.last_parts["E_A"] == 0.0), "off by default"
+    assert np.all(off.last_parts["E_A"] == 0.0), "w_A = 0 turns it off"
     with pytest.raises(ConfigError):
         ObjectiveWeights(arm_prior=-1.0)
+
+
+def test_the_arm_prior_weighs_by_how_side_on_the_reference_pose_stands(body):
+    """E_A's scale is |sin| of the angle between the body's forward axis and the line of sight
+    to its root: 0 facing the camera or turned away, 1 side on, sin 45° half
+    turned; a body facing along the optical axis but off to one side or below it is seen
+    obliquely (by hand)."""
+    from scipy.spatial.transform import Rotation
+
+    from swarmpose.body.kinematics import matrix_to_quaternion
+
+    objective = Objective(body, INTR, ParticleScorer(body, INTR, (32, 32)), ObjectiveWeights(arm_prior=1.0))
+    facing = Rotation.from_euler("x", 180, degrees=True).as_matrix()  # upright, facing the camera
+
+    def pose(turn_deg: float, root=(0.0, 0.0, 2.5)) -> np.ndarray:
+        q = matrix_to_quaternion(Rotation.from_euler("y", turn_deg, degrees=True).as_matrix() @ facing)
+        return body.rest_pose(root, tuple(q))
+
+    got = [objective.side_on_share(pose(t)) for t in (0.0, 90.0, 180.0, -90.0, 45.0)]
+    np.testing.assert_allclose(got, [0.0, 1.0, 0.0, 1.0, np.sqrt(0.5)], atol=1e-9)
+    np.testing.assert_allclose(objective.side_on_share(pose(0.0, (1.5, 0.0, 2.5))), 1.5 / np.hypot(1.5, 2.5),
+                               atol=1e-9)
+    # seen from above (the hips 1 m below the optical axis, 1 m away) a front view reads as
+    # sin 45° side on: the measured form counts the tilt of the line of sight too
+    np.testing.assert_allclose(objective.side_on_share(pose(0.0, (0.0, 1.0, 1.0))), np.sqrt(0.5), atol=1e-9)
+    depth = np.zeros((INTR.height, INTR.width))
+    side = pose(90.0)
+    bent = side.copy()
+    bent[ARM_PRIOR_COLUMNS[0]] += 0.5
+    for reference, scale in ((pose(0.0), 0.0), (side, 1.0)):
+        objective.set_frame(depth, (0, 0, 64, 64), JointTargets.empty(), reference)
+        np.testing.assert_allclose(objective(bent[None])[0] - objective(side[None])[0], 0.25 * scale, atol=1e-9)
 
 
 def test_bad_weights():
