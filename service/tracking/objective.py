@@ -32,8 +32,9 @@ sweep in BENCHMARKS.md):
   it raised or swung out where nothing contradicts it; a weak pull to the rest pose puts it
   where an unobserved arm usually is. Unscaled, the pull helped the side views and cost the
   views from behind (a facing decision tipped) and real arm motions; scaled, the matrix and
-  UTD-MHAD gained, but the regression subset's jumping jacks from behind (p = g = 32) missed
-  its bound, so it is opt-in (BENCHMARKS.md, issue 12, fifth part).
+  UTD-MHAD gained, but as the default it failed the regression subset's side walk (p = g = 32)
+  and a real upper body close below the camera (whose tilted line of sight reads as partly
+  side on), so it is opt-in (BENCHMARKS.md, issue 12, fifth part).
 * Left/right label swaps of the detector (common on people seen from behind or the side):
   with ``label_swaps``, each detected left/right pair (shoulders, elbows, ..., ears) is
   matched to the model's pair in the better of the two assignments, the crossed one at a
