@@ -1,0 +1,25 @@
+"""The resumable benchmarks' records: read back only when made with the same settings."""
+
+from __future__ import annotations
+
+from swarmpose.bench.store import read_record, tracker_settings, write_record
+
+
+def test_a_record_is_read_back_only_with_its_own_settings(tmp_path):
+    path = tmp_path / "cell.json"
+    write_record(path, {"mpjpe_mm": 42.0, **tracker_settings({"arm_prior": 1.0})})
+    assert read_record(path, tracker_settings({"arm_prior": 1.0}))["mpjpe_mm"] == 42.0
+    assert read_record(path, tracker_settings(None)) is None, "made with another arm prior"
+    assert read_record(tmp_path / "missing.json", {}) is None
+    (tmp_path / "broken.json").write_text("{not json")
+    assert read_record(tmp_path / "broken.json", {}) is None
+
+
+def test_a_record_made_before_a_setting_existed_reads_as_its_default(tmp_path):
+    """Records written before arm_prior existed lack it: they were made with it off (0), so they
+    resume a run at the default and not one with the prior on."""
+    path = tmp_path / "old.json"
+    write_record(path, {"mpjpe_mm": 50.0, "particles": 64, "generations": 64, "max_people": 1})
+    assert read_record(path, tracker_settings(None))["mpjpe_mm"] == 50.0
+    assert read_record(path, tracker_settings({"arm_prior": 1.0})) is None
+    assert read_record(path, tracker_settings({"particles": 32})) is None
