@@ -219,8 +219,7 @@ def mean_over_seeds(records: list[dict]) -> list[dict]:
         for key in AVERAGED:
             values = [r.get(key) for r in group]
             out[key] = None if any(v is None for v in values) else float(np.mean(values))
-        deltas = [r.get("mpjpe_mm") for r in group]
         out["seeds"] = len(group)
-        out["mpjpe_spread_mm"] = None if any(d is None for d in deltas) else float(np.ptp(deltas))
+        out["mpjpe_spread_mm"] = None if out["mpjpe_mm"] is None else float(np.ptp([r["mpjpe_mm"] for r in group]))
         merged.append(out)
     return merged

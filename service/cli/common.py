@@ -65,20 +65,22 @@ def non_negative_int(text: str) -> int:
     return value
 
 
-def non_negative_float(text: str) -> float:
-    """An argparse type: a finite number, 0 or more."""
+def _non_negative(text: str, what: str) -> float:
+    """``text`` as a finite number, 0 or more; else an argparse error that calls it ``what``."""
     value = float(text)
     if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"must be a number, 0 or more, got {text}")
+        raise argparse.ArgumentTypeError(f"must be {what}, 0 or more, got {text}")
     return value
+
+
+def non_negative_float(text: str) -> float:
+    """An argparse type: a finite number, 0 or more."""
+    return _non_negative(text, "a number")
 
 
 def seconds(text: str) -> float:
     """An argparse type: a finite number of seconds, 0 or more."""
-    value = float(text)
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"must be a number of seconds, 0 or more, got {text}")
-    return value
+    return _non_negative(text, "a number of seconds")
 
 
 def add_body_options(p: argparse.ArgumentParser) -> None:

@@ -140,7 +140,7 @@ class BvhSink(FileSink):
         if not np.array_equal(body.rig.parents, self.rig.parents):
             raise OutputError(f"BVH file {self.path}: body {body.name} has other bones than {self.body.name}; "
                               "a BVH file animates one skeleton")
-        saved = (self.body, self.rig, self._last, self._poses, self._count_at)
+        saved = (self.body, self.rig, self._last, self._count_at)  # what the rewrite changes
         temporary = self.path.with_name(self.path.name + ".tmp")
         try:
             rows = self._written_rows()
@@ -159,7 +159,7 @@ class BvhSink(FileSink):
                 out.write("".join(row + "\n" for row in rows).encode("ascii"))
             os.replace(temporary, self.path)  # the old file stays open until this succeeded
         except OSError as exc:
-            self.body, self.rig, self._last, self._poses, self._count_at = saved
+            self.body, self.rig, self._last, self._count_at = saved
             with contextlib.suppress(OSError):  # a partial temporary file, not what stood in its way
                 if temporary.is_file():
                     temporary.unlink()

@@ -51,6 +51,12 @@ def sample_surface_depth(depth: np.ndarray, u: float, v: float, window_px: int, 
     return float(np.median(near))
 
 
+def median_depth(depth: np.ndarray) -> float | None:
+    """The median (m) of a depth image's valid pixels (finite, > 0); None when it has none."""
+    valid = depth[np.isfinite(depth) & (depth > 0)]
+    return float(np.median(valid)) if valid.size else None
+
+
 def lift_keypoints(depth: np.ndarray, intrinsics: Intrinsics, points: dict[str, tuple[float, float, float]],
                    window_m: float = LIFT_WINDOW_M, max_spread_m: float = 0.7,
                    typical_depth: float | None = None) -> dict[str, np.ndarray]:
@@ -66,11 +72,9 @@ def lift_keypoints(depth: np.ndarray, intrinsics: Intrinsics, points: dict[str, 
     if not points:
         return out
     if typical_depth is None:
-        valid = depth[np.isfinite(depth) & (depth > 0)]
-        typical_depth = float(np.median(valid)) if valid.size else 3.0
-    typical = typical_depth
+        typical_depth = median_depth(depth) or 3.0
     for name, (x, y, _score) in points.items():
-        window = max(3, int(round(window_m * intrinsics.fx / typical)))
+        window = max(3, int(round(window_m * intrinsics.fx / typical_depth)))
         z = sample_surface_depth(depth, x, y, window)
         if not np.isfinite(z):
             out[name] = np.full(3, np.nan)

@@ -26,7 +26,7 @@ sweep in BENCHMARKS.md):
 * ``E_A`` in **rad²** (:meth:`Objective.arm_prior_rad2`; not in the paper): the squared
   distance of both arms' shoulder (roll, pitch, yaw) and elbow angles from the body's rest
   angles, weight w_A (``arm_prior`` setting; 0 = off, the default) times how side on the
-  reference pose stands (:meth:`Objective.side_on_share`: 0 facing the camera or turned
+  reference pose stands (:func:`side_on_share`: 0 facing the camera or turned
   away, 1 side on). Seen from the side, an arm that hangs over the torso or points at the
   camera is missed by the detector and hardly shows in the depth tile, and the search left
   it raised or swung out where nothing contradicts it; a weak pull to the rest pose puts it
@@ -79,6 +79,17 @@ TORSO_RADIUS_SHARE = 0.4
 """The torso's core, kept free of elbows and wrists, is a capsule from the hips' middle to the
 shoulders' middle of radius this share of the distance between the hip joints (about 7.5 cm
 on an adult): only arms clearly inside the trunk pay."""
+
+
+def side_on_share(pose: np.ndarray) -> float:
+    """|sin| of the angle between the body's forward axis and the line of sight to its root
+    for a pose (36,): 0 facing the camera or turned away, 1 side on (E_A's scale). The
+    measured form: a line of sight tilted up or down counts too (a person close below the
+    camera reads as partly side on); a turn-only variant measured worse (BENCHMARKS.md)."""
+    h = np.asarray(pose, float)
+    sight = h[:3] / max(float(np.linalg.norm(h[:3])), 1e-9)
+    cos = float(quaternion_to_matrix(h[3:7])[:, 2] @ sight)
+    return float(np.sqrt(max(1.0 - cos * cos, 0.0)))
 
 
 @dataclass(frozen=True)
@@ -260,13 +271,9 @@ class Objective:
             if scorer is self.scorer:
                 self.has_depth = observed > 0
         self.normaliser, self.coarse_normaliser = normalisers[0], normalisers[-1]
-        self.set_reference(reference)
-
-    def set_reference(self, pose: np.ndarray) -> None:
-        """Weigh E_A by how side on ``pose`` (36,), the pose the search starts around, stands
-        (:meth:`side_on_share`); :meth:`set_frame` calls it. An objective that never had a
-        frame or a reference (the start's joint-term-only stage) weighs E_A in full."""
-        self.arm_prior_scale = self.side_on_share(pose)
+        # E_A weighs by how side on the pose the search starts around stands; an objective that
+        # never had a frame (the start's joint-term-only stage) weighs it in full
+        self.arm_prior_scale = side_on_share(reference)
 
     def set_targets(self, targets: JointTargets) -> None:
         """The frame's joint targets alone: all a joint-term-only objective (w_D = 0) needs."""
@@ -290,16 +297,6 @@ class Objective:
     @property
     def uses_joints(self) -> bool:
         return self.weights.joints > 0 and self.targets.count > 0
-
-    def side_on_share(self, pose: np.ndarray) -> float:
-        """|sin| of the angle between the body's forward axis and the line of sight to its root
-        for a pose (36,): 0 facing the camera or turned away, 1 side on (E_A's scale). The
-        measured form: a line of sight tilted up or down counts too (a person close below the
-        camera reads as partly side on); a turn-only variant measured worse (BENCHMARKS.md)."""
-        h = np.asarray(pose, float)
-        sight = h[:3] / max(float(np.linalg.norm(h[:3])), 1e-9)
-        cos = float(quaternion_to_matrix(h[3:7])[:, 2] @ sight)
-        return float(np.sqrt(max(1.0 - cos * cos, 0.0)))
 
     def arm_prior_rad2(self, h: np.ndarray) -> np.ndarray:
         """(P,) rad²: E_A of poses h (P, 36), the squared distance of the arms' angles

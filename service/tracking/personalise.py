@@ -75,7 +75,7 @@ from swarmpose.gpu.tile import TileBox
 from swarmpose.sources.base import Frame
 from swarmpose.tracking.body_tracker import BodyTracker, observed_depth
 from swarmpose.tracking.config import TrackerConfig
-from swarmpose.tracking.lift import lift_keypoints
+from swarmpose.tracking.lift import lift_keypoints, median_depth
 from swarmpose.tracking.objective import JointTargets, Objective
 from swarmpose.tracking.pso import PsoConfig, minimise
 
@@ -202,8 +202,7 @@ def model_depth(body: SkinnedBody, pose: np.ndarray, intrinsics: Intrinsics) -> 
 
 def typical_depth(frame: Frame) -> float | None:
     """The median (m) of ``frame``'s valid depth, the lift's ``typical_depth`` on it (None: no depth)."""
-    observed = observed_depth(frame.depth)
-    return float(np.median(observed[observed > 0])) if np.any(observed > 0) else None
+    return median_depth(observed_depth(frame.depth))
 
 
 def lift_bias(body: SkinnedBody, poses: Sequence[np.ndarray], typical: Sequence[float | None],

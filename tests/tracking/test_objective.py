@@ -18,7 +18,14 @@ from swarmpose.sim.evaluate import facing_errors_deg
 from swarmpose.sim.render import Renderer, Room
 from swarmpose.tracking.init_pose import torso_pose, turned
 from swarmpose.tracking.lift import JOINT_RADIUS, lift_keypoints
-from swarmpose.tracking.objective import ARM_PRIOR_COLUMNS, SWAP_COST, JointTargets, Objective, ObjectiveWeights
+from swarmpose.tracking.objective import (
+    ARM_PRIOR_COLUMNS,
+    SWAP_COST,
+    JointTargets,
+    Objective,
+    ObjectiveWeights,
+    side_on_share,
+)
 
 INTR = Intrinsics.kinect_v1()
 FACING = (0.0, 1.0, 0.0, 0.0)
@@ -202,13 +209,13 @@ def test_the_arm_prior_weighs_by_how_side_on_the_reference_pose_stands(body):
         q = matrix_to_quaternion(Rotation.from_euler("y", turn_deg, degrees=True).as_matrix() @ facing)
         return body.rest_pose(root, tuple(q))
 
-    got = [objective.side_on_share(pose(t)) for t in (0.0, 90.0, 180.0, -90.0, 45.0)]
+    got = [side_on_share(pose(t)) for t in (0.0, 90.0, 180.0, -90.0, 45.0)]
     np.testing.assert_allclose(got, [0.0, 1.0, 0.0, 1.0, np.sqrt(0.5)], atol=1e-9)
-    np.testing.assert_allclose(objective.side_on_share(pose(0.0, (1.5, 0.0, 2.5))), 1.5 / np.hypot(1.5, 2.5),
+    np.testing.assert_allclose(side_on_share(pose(0.0, (1.5, 0.0, 2.5))), 1.5 / np.hypot(1.5, 2.5),
                                atol=1e-9)
     # seen from above (the hips 1 m below the optical axis, 1 m away) a front view reads as
     # sin 45° side on: the measured form counts the tilt of the line of sight too
-    np.testing.assert_allclose(objective.side_on_share(pose(0.0, (0.0, 1.0, 1.0))), np.sqrt(0.5), atol=1e-9)
+    np.testing.assert_allclose(side_on_share(pose(0.0, (0.0, 1.0, 1.0))), np.sqrt(0.5), atol=1e-9)
     depth = np.zeros((INTR.height, INTR.width))
     side = pose(90.0)
     bent = side.copy()
