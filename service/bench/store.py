@@ -8,9 +8,12 @@ import json
 import os
 from pathlib import Path
 
-TRACKER_DEFAULTS = {"particles": 64, "generations": 64, "max_people": 1, "arm_prior": 0.0}
+TRACKER_DEFAULTS = {"particles": 64, "generations": 64, "max_people": 1, "arm_prior": 0.0, "limb_flips": True}
 """The tracker settings every record stores, so that a resume compares them even when the
-caller left them at their defaults; a record made before a setting existed reads as its default."""
+caller left them at their defaults."""
+BEFORE_THE_SETTING = {**TRACKER_DEFAULTS, "limb_flips": False}
+"""What a record that lacks a setting was made with: the tracker's behaviour before the setting
+existed (its default then, or, for a new behaviour that is on by default now, off)."""
 
 
 def tracker_settings(tracker: dict | None) -> dict:
@@ -20,13 +23,13 @@ def tracker_settings(tracker: dict | None) -> dict:
 
 def read_record(path: Path, expected: dict) -> dict | None:
     """The JSON record at ``path`` if each key of ``expected`` holds the same value in it (a
-    tracker setting it lacks: :data:`TRACKER_DEFAULTS`' value); None when it is absent,
+    tracker setting it lacks: :data:`BEFORE_THE_SETTING`'s value); None when it is absent,
     unreadable or was made with other settings."""
     try:
         record = json.loads(Path(path).read_text())
     except (OSError, ValueError):
         return None
-    return record if all(record.get(k, TRACKER_DEFAULTS.get(k)) == v for k, v in expected.items()) else None
+    return record if all(record.get(k, BEFORE_THE_SETTING.get(k)) == v for k, v in expected.items()) else None
 
 
 def write_record(path: Path, record: dict) -> None:

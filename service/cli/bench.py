@@ -67,7 +67,7 @@ def _names(allowed: tuple[str, ...]):
 def cmd_bench_accuracy(args: argparse.Namespace) -> int:
     """The tracker over the benchmark matrix: per cell and mode Δ, A(100), lost frames, facing."""
     tracker = {"particles": args.particles, "generations": args.generations, "max_people": args.max_people,
-               "arm_prior": args.arm_prior}
+               "arm_prior": args.arm_prior, "limb_flips": args.limb_flips}
     records = run_matrix(Path(args.out), subset=args.subset, detectors=args.detectors, modes=args.modes,
                          frames=args.frames, tracker=tracker, assets=args.assets, progress=not quiet(args),
                          seeds=args.seeds)
@@ -86,7 +86,8 @@ def cmd_bench_accuracy(args: argparse.Namespace) -> int:
 
 def cmd_bench_utdmhad(args: argparse.Namespace) -> int:
     """The tracker on UTD-MHAD's real Kinect sequences against the Kinect skeleton."""
-    tracker = {"particles": args.particles, "generations": args.generations, "arm_prior": args.arm_prior}
+    tracker = {"particles": args.particles, "generations": args.generations, "arm_prior": args.arm_prior,
+               "limb_flips": args.limb_flips}
     records = run_utdmhad(Path(args.out), modes=args.modes, detectors=args.detectors, shapes=args.shapes,
                           frames=args.frames, tracker=tracker, subjects=args.subjects,
                           actions=tuple(int(a) for a in args.actions), assets=args.assets,
@@ -122,12 +123,14 @@ def _add_assets(p: argparse.ArgumentParser) -> None:
                    help="shared assets folder (default: $SWARMPOSE_ASSETS or ../shared/assets)")
 
 
-def _add_arm_prior(p: argparse.ArgumentParser) -> None:
-    """--arm-prior of the resumable tracking benchmarks (a record keeps it, so a resume with
-    another value tracks again)."""
+def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
+    """--arm-prior and --limb-flips of the resumable tracking benchmarks (a record keeps them, so a
+    resume with other values tracks again)."""
     p.add_argument("--arm-prior", type=non_negative_float, default=0.0,
                    help="the tracker's w_A (cost per rad² of the arms away from rest, times how side on the "
                         "person stands; 0 = off, the tracker's default)")
+    p.add_argument("--limb-flips", action=argparse.BooleanOptionalAction, default=True,
+                   help="the tracker's depth flips of the limbs as particles (on: the tracker's default)")
 
 
 def _add_budget_and_assets(p: argparse.ArgumentParser) -> None:
@@ -186,7 +189,7 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
                    help="tracker seeds per cell and mode; the table and heat map show the mean over them "
                         "(a cell's Δ varies between seeds)")
     _add_budget_and_assets(p)
-    _add_arm_prior(p)
+    _add_tracker_switches(p)
     p.add_argument("--json", action="store_true", help="one JSON object with every record")
     p.set_defaults(func=cmd_bench_accuracy)
     p = bench.add_parser("utdmhad", parents=[common], formatter_class=DEFAULTS,
@@ -203,7 +206,7 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
                    help="comma-separated action numbers 1..27 (default: all)")
     p.add_argument("--frames", type=int, default=0, help="first frames of each sequence (0 = all)")
     _add_budget_and_assets(p)
-    _add_arm_prior(p)
+    _add_tracker_switches(p)
     p.add_argument("--json", action="store_true", help="one JSON object with the summary and every record")
     p.set_defaults(func=cmd_bench_utdmhad)
     p = bench.add_parser("overlays", parents=[common], formatter_class=DEFAULTS,

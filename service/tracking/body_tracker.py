@@ -6,8 +6,10 @@ Per frame (:meth:`BodyTracker.step`):
 1. The detection's joints (score >= ``min_score``) are lifted to J^e on the depth.
 2. **Start**. With a previous solution (state *tracking*), particles start around it in a
    region that contains J^e (:mod:`swarmpose.tracking.search`); the last 5 solutions and
-   the J^e torso pose are injected as particles; every ``recheck`` frames the start's
-   facings, refitted from the detection, compete as particles too. Without one (the first frame, or
+   the J^e torso pose are injected as particles, and so are the previous solution's limbs
+   mirrored along the line of sight (:mod:`swarmpose.tracking.limb_flips`, ``limb_flips``);
+   every ``recheck`` frames the start's facings, refitted from the detection, compete as
+   particles too. Without one (the first frame, or
    after the track was lost: state *init*), the torso pose of J^e
    (:func:`swarmpose.tracking.init_pose.torso_pose`) with the body's rest angles, turned
    to each of four facings (side and back views make its facing unreliable), starts one
@@ -42,6 +44,7 @@ from swarmpose.tracking import search, verdict
 from swarmpose.tracking.config import MODE_WEIGHTS, TrackerConfig
 from swarmpose.tracking.init_pose import FACINGS_DEG, torso_pose, turned
 from swarmpose.tracking.lift import lift_eval_joints
+from swarmpose.tracking.limb_flips import limb_flips
 from swarmpose.tracking.objective import JointTargets, Objective
 from swarmpose.tracking.one_euro import PoseFilter
 from swarmpose.tracking.pso import PsoResult, minimise
@@ -226,6 +229,11 @@ class BodyTracker:
             start = search.spread(centre, pso.particles, rng, 0.04 + offset, 0.15, radius)
             seeds = ([centre] + ([self.challenger] if self.challenger is not None else [])
                      + self.history[-HISTORY:][::-1] + ([torso] if torso is not None else []) + recheck)
+            room = pso.particles - len(seeds)
+            if self.config.limb_flips and room > 0:
+                t_flips = time.perf_counter()
+                seeds += limb_flips(self.body, centre, most=room)
+                timings["flips"] = 1000 * (time.perf_counter() - t_flips)
         for i, s in enumerate(seeds[:pso.particles]):
             start[i] = s
 

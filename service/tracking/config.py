@@ -56,6 +56,8 @@ class TrackerConfig:
     arm_prior: float = setting(0.0, "w_A: cost per rad² of the arms' angles away from the rest pose, times how "
                                     "side on the person stands (0 = off; 1 holds the arms a side view hides)",
                                minimum=0.0)
+    limb_flips: bool = setting(True, "every frame, each limb of the last solution mirrored along the line of sight "
+                                     "(same image, other depth) joins the swarm as a particle")
     smoothing: str = setting("off", "smooth the published poses: off (as in evaluation) or one-euro (a One-Euro "
                                     "filter; the search itself always starts from the unfiltered pose)",
                              choices=SMOOTHING)

@@ -14,7 +14,8 @@ shape space's start body). :func:`fit_shape` chooses ``keyframes`` well-spread f
    a buffer upload into one scorer per key frame (same topology), each scorer keeping its
    frame's observation for the whole fit.
 2. **Pose step.** Every key frame's pose is refitted with the new shape by the tracker's own
-   per-frame search (``pose_steps`` times), started from the frame's last pose.
+   per-frame search (``pose_steps`` times), started from the frame's last pose, without the
+   depth flips of the limbs (:mod:`~swarmpose.tracking.limb_flips`): a local refinement.
 
 Steps 1 and 2 alternate for ``rounds`` rounds.
 
@@ -308,7 +309,7 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
                                    "the whole body is seen")
     if config.mode == "lift":
         raise PersonalisationError("the lift mode fits no body; personalise with mode hybrid, depth or joints")
-    config = replace(config, max_people=1, coarse_share=0.0)
+    config = replace(config, max_people=1, coarse_share=0.0, limb_flips=False)  # the pose step: a local search
     context = context or ClContext.for_spec(config.device)
     x = space.start
     body = space.fitting_body(x)
