@@ -15,13 +15,16 @@ camera ray at the same distance from the pivot (the mirror of the bone through t
 across the line of sight), the end joint then to either point of its own ray at its bone's
 length from the new middle joint; or the end joint alone flips around the middle one. Each
 flipped limb's angles are solved by a few damped Gauss-Newton steps (numpy forward
-kinematics, all candidates in one batch; about 10 ms a frame on 2 cores where arms reach
-towards the camera), and a candidate that reaches its joints within :data:`MAX_MISS_M` joins
+kinematics, all candidates in one batch; about 10 ms a frame on 2 cores, shins below the
+camera included: they lean out of the plane across their rays, but their mirror would bend the
+knee forwards, so they are solved and dropped), and a candidate that reaches its joints within :data:`MAX_MISS_M` joins
 the frame's swarm as a particle. The objective decides: a flip that explains the depth
 better wins at once, one that does not costs nothing but the particle it replaced.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -101,19 +104,19 @@ def flip_targets(pivot: np.ndarray, middle: np.ndarray, end: np.ndarray) -> list
     return out
 
 
-def solve_limbs(body: SkinnedBody, poses: np.ndarray, points: list[tuple[str, str]], columns: list[np.ndarray],
+def solve_limbs(body: SkinnedBody, pose: np.ndarray, limbs: Sequence[tuple[str, str, str]],
                 targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Poses (K, 36) with each one's limb angles moved so that its two points reach their targets.
+    """K copies of ``pose`` (36,), each with one limb's 4 angles (:func:`limb_columns`) moved so
+    that its middle and end points reach their targets.
 
-    poses: (K, 36) starts; points: per pose, the (middle, end) point names; columns: per pose,
-    the (4,) pose columns solved; targets: (K, 2, 3) m. Returns the solved poses and each one's
-    larger miss (K,) m."""
-    k = len(poses)
-    x = np.array(poses, dtype=np.float64)
-    cols = np.stack(columns)
+    limbs: K (pivot, middle, end) point names out of :data:`FLIP_LIMBS`; targets: (K, 2, 3) m, the
+    middle's and the end's. Returns the solved poses (K, 36) and each one's larger miss (K,) m."""
+    k = len(limbs)
+    x = np.repeat(np.asarray(pose, dtype=np.float64)[None], k, axis=0)
+    cols = np.stack([limb_columns(limb) for limb in limbs])
     lo, hi = ANGLE_LIMITS[cols - 7, 0], ANGLE_LIMITS[cols - 7, 1]
-    names = tuple(dict.fromkeys(n for pair in points for n in pair))
-    where = np.array([[names.index(a), names.index(b)] for a, b in points])
+    names = tuple(dict.fromkeys(n for _, middle, end in limbs for n in (middle, end)))
+    where = np.array([[names.index(middle), names.index(end)] for _, middle, end in limbs])
     rows = np.arange(k)[:, None]
 
     def reach(batch: np.ndarray) -> np.ndarray:  # (n·K, 36) -> (n, K, 6)
@@ -136,21 +139,14 @@ def solve_limbs(body: SkinnedBody, poses: np.ndarray, points: list[tuple[str, st
 
 
 def limb_flips(body: SkinnedBody, pose: np.ndarray, most: int | None = None) -> list[np.ndarray]:
-    """The depth flips (36,) of the limbs of ``pose`` (36,) that reach their targets (module doc),
-    arms first; at most ``most`` candidates are solved (None: all)."""
+    """The depth flips (36,) of the limbs of ``pose`` (36,) that reach their targets (module doc), in
+    :data:`FLIP_LIMBS`' order; at most the first ``most`` candidates are solved (None: all)."""
     names = tuple(n for limb in FLIP_LIMBS for n in limb)
     at = dict(zip(names, body.posed_points(np.asarray(pose, float)[None], names)[0]))
-    starts, points, columns, targets = [], [], [], []
-    for limb in FLIP_LIMBS:
-        pivot, middle, end = limb
-        for new_middle, new_end in flip_targets(at[pivot], at[middle], at[end]):
-            starts.append(pose)
-            points.append((middle, end))
-            columns.append(limb_columns(limb))
-            targets.append((new_middle, new_end))
-    if most is not None:
-        del starts[most:], points[most:], columns[most:], targets[most:]
-    if not starts:
+    candidates = [(limb, target) for limb in FLIP_LIMBS for target in flip_targets(*(at[n] for n in limb))]
+    candidates = candidates[:most]
+    if not candidates:
         return []
-    solved, miss = solve_limbs(body, np.stack(starts), points, columns, np.asarray(targets))
+    solved, miss = solve_limbs(body, pose, [limb for limb, _ in candidates],
+                               np.asarray([target for _, target in candidates]))
     return [p for p, m in zip(solved, miss) if m <= MAX_MISS_M]

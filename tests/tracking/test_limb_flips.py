@@ -7,7 +7,7 @@ import pytest
 
 from swarmpose.body.loader import load_body
 from swarmpose.core.camera import Intrinsics
-from swarmpose.tracking.limb_flips import FLIP_LIMBS, flip_targets, limb_columns, limb_flips, ray_points, solve_limbs
+from swarmpose.tracking.limb_flips import FLIP_LIMBS, flip_targets, limb_flips, ray_points, solve_limbs
 
 INTR = Intrinsics(width=320, height=240, fx=285.0, fy=285.0, cx=160.0, cy=120.0)
 FACING = (0.0, 1.0, 0.0, 0.0)
@@ -66,8 +66,7 @@ def test_flips_of_a_tilted_arm_keep_its_bones_and_its_rays():
 
 
 def solved_pose(body, start: np.ndarray, limb: int, middle: np.ndarray, end: np.ndarray) -> np.ndarray:
-    _, m, e = FLIP_LIMBS[limb]
-    out, miss = solve_limbs(body, start[None], [(m, e)], [limb_columns(FLIP_LIMBS[limb])], np.array([[middle, end]]))
+    out, miss = solve_limbs(body, start, [FLIP_LIMBS[limb]], np.array([[middle, end]]))
     assert miss[0] < 0.01, "the solver reaches a reachable arm pose"
     return out[0]
 
@@ -106,8 +105,8 @@ def test_the_rest_pose_facing_the_camera_has_no_flip_its_joints_allow(body):
     out of the plane across their rays by more than MIN_TILT_RAD, but their mirror would bend the
     knees forwards, beyond their limit: tried, missed by more than MAX_MISS_M, dropped."""
     rest = body.rest_pose((0.0, 0.0, 3.0), FACING)
-    at = dict(zip((n for limb in FLIP_LIMBS for n in limb),
-                  body.posed_points(rest[None], tuple(n for limb in FLIP_LIMBS for n in limb))[0]))
+    names = tuple(n for limb in FLIP_LIMBS for n in limb)
+    at = dict(zip(names, body.posed_points(rest[None], names)[0]))
     tried = {limb[0]: flip_targets(*(at[n] for n in limb)) for limb in FLIP_LIMBS}
     assert tried["left_shoulder"] == [] and tried["right_shoulder"] == []
     assert tried["left_hip"] and tried["right_hip"], "the shins below the camera are tried"
