@@ -87,7 +87,7 @@ def cmd_bench_accuracy(args: argparse.Namespace) -> int:
 def cmd_bench_utdmhad(args: argparse.Namespace) -> int:
     """The tracker on UTD-MHAD's real Kinect sequences against the Kinect skeleton."""
     tracker = {"particles": args.particles, "generations": args.generations, "arm_prior": args.arm_prior,
-               "limb_flips": args.limb_flips}
+               "limb_flips": args.limb_flips, "auto_height": args.auto_height}
     records = run_utdmhad(Path(args.out), modes=args.modes, detectors=args.detectors, shapes=args.shapes,
                           frames=args.frames, tracker=tracker, subjects=args.subjects,
                           actions=tuple(int(a) for a in args.actions), assets=args.assets,
@@ -200,7 +200,11 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
     p.add_argument("--detectors", type=_names(tuple(DETECTORS)), default=("simulated",),
                    help="comma-separated: simulated (from the Kinect skeleton) and/or networks on the shaded depth")
     p.add_argument("--shapes", type=_names(SHAPES), default=("default",),
-                   help="default: the body's default shape; measured: the height measured on the first frame")
+                   help="default: the body's default shape (scaled to the person by the tracker's automatic "
+                        "height unless --no-auto-height); measured: the subject's height measured on the first "
+                        "frames of their sequences")
+    p.add_argument("--auto-height", action=argparse.BooleanOptionalAction, default=True,
+                   help="the tracker's automatic height for the default shape (on: the tracker's default)")
     p.add_argument("--subjects", type=_names(SUBJECTS), default=SUBJECTS, help="comma-separated subjects")
     p.add_argument("--actions", type=_names(tuple(str(a) for a in ACTIONS)), default=(),
                    help="comma-separated action numbers 1..27 (default: all)")

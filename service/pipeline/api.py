@@ -27,6 +27,7 @@ from swarmpose.pipeline.run import results, source_error
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
 from swarmpose.sources.registry import open_source
+from swarmpose.tracking.auto_height import HeightFittingTracker, applies
 from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.config import TrackerConfig
 from swarmpose.tracking.result import FrameResult
@@ -37,8 +38,11 @@ class Tracker:
 
     body: ``"builtin"``, ``"makehuman:DIR"``, a ``.glb``/``.gltf`` path, or a loaded
     :class:`~swarmpose.body.skinned.SkinnedBody`; shape: the body's shape preset or
-    measurements (spec strings only). detector: a spec (``"auto"``: the recorded detections
-    of a ``source`` that has them, else ``"movenet"``; ``"movenet"``/``"blazepose"`` from the
+    measurements (spec strings only). A ``"builtin"`` or ``"makehuman:DIR"`` body without a
+    shape is scaled to each person's height on their first upright frames (``auto_height``,
+    :mod:`swarmpose.tracking.auto_height`; a loaded body is kept as it is). detector: a spec
+    (``"auto"``: the recorded detections of a ``source`` that has them, else ``"movenet"``;
+    ``"movenet"``/``"blazepose"`` from the
     models folder, ``$SWARMPOSE_MODELS`` first; ``"onnx:MODEL.onnx"``, ``"openpose-json:DIR"``,
     ``"simulated"``) or an object with ``detect(frame, box)``;
     a detector made from a spec is the tracker's and closed with it. intrinsics: the
@@ -77,8 +81,10 @@ class Tracker:
         self._owns_detector = isinstance(detector, str)
         self.detector: Detector = make_detector(detector, source) if isinstance(detector, str) else detector
         self.intrinsics = intrinsics
+        tracker = (HeightFittingTracker if isinstance(body, str) and applies(body, shape or "", self.config)
+                   else BodyTracker)
         self.pipeline = FramePipeline(
-            self.detector, lambda intr, body_id: BodyTracker(self.body, intr, self.config, body_id=body_id),
+            self.detector, lambda intr, body_id: tracker(self.body, intr, self.config, body_id=body_id),
             self.config.max_people, self.config.retire_frames)
         self._next_index = 0
         self._closed = False

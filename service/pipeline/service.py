@@ -34,6 +34,7 @@ from swarmpose.publish.zenoh_link import ZenohSink
 from swarmpose.sim.scoring import ScoreSink
 from swarmpose.sources.base import Frame, FrameSource
 from swarmpose.sources.registry import open_source
+from swarmpose.tracking.auto_height import HeightFittingTracker, applies
 from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.online_personalise import PersonalisingTracker
 
@@ -75,6 +76,9 @@ def make_pipeline(body: SkinnedBody, detector: Detector, config: ServiceConfig,
     if space is not None and t.personalize > 0:
         def make(intrinsics, body_id):
             return PersonalisingTracker(space, t.personalize, intrinsics, t, body_id=body_id)
+    elif applies(config.body, config.shape, t):
+        def make(intrinsics, body_id):
+            return HeightFittingTracker(body, intrinsics, t, body_id=body_id)
     else:
         def make(intrinsics, body_id):
             return BodyTracker(body, intrinsics, t, body_id=body_id)
@@ -123,7 +127,8 @@ def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score:
     tracking_body = body if len(body.triangles) <= triangles else body.tracking_lod(triangles)
     parts = Parts(config, tracking_body, source, detector, make_pipeline(tracking_body, detector, config, space))
     if out:
-        body_of = parts.pipeline.body_of if space is not None else None  # --personalize: the locked shapes
+        changes = space is not None or applies(config.body, config.shape, config.tracker)
+        body_of = parts.pipeline.body_of if changes else None  # the shapes --personalize or auto_height lock
         recording = open_recording(Path(out), tracking_body, fps=parts.fps, overlay=config.overlay, body_of=body_of)
         for sink in recording:  # the run closes them; this covers a failure before it starts
             stack.callback(sink.close)
