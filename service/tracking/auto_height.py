@@ -52,10 +52,11 @@ from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.detect.joints import Joints2D
 from swarmpose.gpu.context import ClContext
+from swarmpose.gpu.reference import raycast_tiles
+from swarmpose.gpu.tile import TileBox
 from swarmpose.sources.base import Frame
 from swarmpose.tracking.body_tracker import BodyTracker, observed_depth
 from swarmpose.tracking.config import TrackerConfig
-from swarmpose.tracking.personalise import model_depth
 from swarmpose.tracking.result import BodyResult
 
 log = logging.getLogger(__name__)
@@ -184,11 +185,30 @@ def person_mask(observed: np.ndarray, model: np.ndarray) -> np.ndarray:
         return around & np.isfinite(observed) & (observed > 0) & (np.abs(observed - near) < DEPTH_BAND_M)
 
 
-def _points(depth: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
-    """(H, W, 3) m: every pixel of ``depth`` (H, W) m back-projected (OpenCV camera axes)."""
+def _points(depth: np.ndarray, intrinsics: Intrinsics, corner: tuple[int, int] = (0, 0)) -> np.ndarray:
+    """(h, w, 3) m: every pixel of ``depth`` (h, w) m back-projected (OpenCV camera axes), the
+    window's top-left pixel being the image's ``corner`` (column, row)."""
     rows, cols = np.indices(depth.shape, dtype=np.float64)
+    rows, cols = rows + corner[1], cols + corner[0]
     z = depth.astype(np.float64)
     return np.stack([(cols - intrinsics.cx) * z / intrinsics.fx, (rows - intrinsics.cy) * z / intrinsics.fy, z], -1)
+
+
+def _window(verts: np.ndarray, intrinsics: Intrinsics) -> TileBox | None:
+    """The image window (whole pixels) that holds the projection of ``verts`` (V, 3) m and the
+    growth of :func:`person_mask` around it, plus a pixel for the normals' neighbours; None when
+    the body is behind the camera or outside the image."""
+    if np.any(verts[:, 2] <= 1e-3):
+        return None
+    uv = intrinsics.project(verts)
+    (u_lo, v_lo), (u_hi, v_hi) = np.floor(uv.min(axis=0)), np.ceil(uv.max(axis=0))
+    tall = v_hi - v_lo + 1
+    grow_u, grow_v = int(GROW_SIDEWAYS * tall) + 2, int(GROW_DOWN_UP * tall) + 2
+    u0, v0 = int(max(u_lo - grow_u, 0)), int(max(v_lo - grow_v, 0))
+    u1, v1 = int(min(u_hi + grow_u + 1, intrinsics.width)), int(min(v_hi + grow_v + 1, intrinsics.height))
+    if u1 <= u0 or v1 <= v0:
+        return None
+    return TileBox(u0, v0, u1 - u0, v1 - v0, u1 - u0, v1 - v0)
 
 
 def facing_along(points: np.ndarray, axis: np.ndarray, max_rad: float = FLAT_MAX_RAD) -> np.ndarray:
@@ -249,16 +269,21 @@ def person_stature(body: SkinnedBody, pose: np.ndarray, depth: np.ndarray, intri
     (:data:`PERCENTILES`) of the person's points within :data:`END_RADIUS_M` of the lines along
     the axis through the model's head and ankles (a raised hand is not the head)."""
     pose = np.asarray(pose, float)
-    model = model_depth(body, pose, intrinsics)
+    verts = body.pose(pose[None], "dqs")[0]
+    window = _window(verts, intrinsics)
+    if window is None:
+        return None
+    model = raycast_tiles(verts[None], np.asarray(body.triangles), window.rays(intrinsics))[0]
     hit = model > 0
     if hit.sum() < MIN_PIXELS:
         return None
-    depth = np.asarray(depth, np.float32)
+    u0, v0 = int(window.u0), int(window.v0)
+    depth = np.asarray(depth, np.float32)[v0:v0 + window.th, u0:u0 + window.tw]
     mask = person_mask(depth, model)
     if mask.sum() < MIN_PIXELS:
         return None
     up = quaternion_to_matrix(pose[3:7])[:, 1]
-    seen = _points(depth, intrinsics)
+    seen = _points(depth, intrinsics, (u0, v0))
     floor = floor_plane(seen, up, mask, hit, facing_along(seen, up))
     axis = up if floor is None else floor[0]
     person = seen[mask]
