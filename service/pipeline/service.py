@@ -34,6 +34,7 @@ from swarmpose.publish.zenoh_link import ZenohSink
 from swarmpose.sim.scoring import ScoreSink
 from swarmpose.sources.base import Frame, FrameSource
 from swarmpose.sources.registry import open_source
+from swarmpose.tracking.auto_height import ESTIMATES as HEIGHT_ESTIMATES
 from swarmpose.tracking.auto_height import HeightFittingTracker, applies
 from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.online_personalise import PersonalisingTracker
@@ -71,19 +72,23 @@ def make_pipeline(body: SkinnedBody, detector: Detector, config: ServiceConfig,
                   space: ShapeSpace | None = None) -> FramePipeline:
     """The per-frame step tracking ``body`` with ``detector`` under ``config.tracker``; with a
     shape ``space`` and ``config.tracker.personalize`` N > 0, each person's tracker personalises
-    its body from that person's first N tracked frames."""
+    its body from that person's first N tracked frames; else, where the automatic height applies
+    (:func:`~swarmpose.tracking.auto_height.applies`), each scales it to the person's stature.
+    Both report in the status and info messages' ``personalisation``."""
     t = config.tracker
+    reported = 0  # the frames each body's personalisation needs, as status and info report it
     if space is not None and t.personalize > 0:
         def make(intrinsics, body_id):
             return PersonalisingTracker(space, t.personalize, intrinsics, t, body_id=body_id)
+        reported = t.personalize
     elif applies(config.body, config.shape, t):
         def make(intrinsics, body_id):
             return HeightFittingTracker(body, intrinsics, t, body_id=body_id)
+        reported = HEIGHT_ESTIMATES
     else:
         def make(intrinsics, body_id):
             return BodyTracker(body, intrinsics, t, body_id=body_id)
-    return FramePipeline(detector, make, t.max_people, t.retire_frames,
-                         personalise_frames=t.personalize if space is not None else 0,
+    return FramePipeline(detector, make, t.max_people, t.retire_frames, personalise_frames=reported,
                          world=make_world(config.floor, config.coordinates))
 
 

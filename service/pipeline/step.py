@@ -100,7 +100,8 @@ class FramePipeline:
     body id; max_people: 1 tracks one person (no segmentation), more tracks each person the
     depth segmentation finds, up to this many; retire_frames: frames a person may go unseen
     before its id is retired; personalise_frames: N when ``make_tracker`` builds trackers that
-    personalise their body from N frames (``--personalize``), else 0; world: the camera's
+    personalise their body from N frames (``--personalize``, or the automatic height's upright
+    frames), else 0; world: the camera's
     world frame (floor, origin, coordinates of the messages), None: camera frame only.
     ``detect`` and ``track`` may run in two threads (one each).
     """
@@ -130,8 +131,9 @@ class FramePipeline:
 
     @property
     def personalisation(self) -> dict | None:
-        """``{"needed": N, "bodies": [each tracked body's state]}`` with ``--personalize N``
-        (``personalise_frames``), None without: the status and info messages' ``personalisation``."""
+        """``{"needed": N, "bodies": [each tracked body's state]}`` with ``--personalize N`` or the
+        automatic height (``personalise_frames``), None without: the status and info messages'
+        ``personalisation``."""
         if not self.personalise_frames:
             return None
         if self.people is not None:

@@ -351,6 +351,14 @@ class HeightFittingTracker(BodyTracker):
                 self.body_id, self.body.height, len(self.factors), self.factor,
                 "" if self.locked else "; measuring on")
 
+    def personalisation(self) -> dict:
+        """This body's state as the status and info messages' ``personalisation`` reports it:
+        ``collecting`` its :data:`ESTIMATES` upright frames (``frames`` so far), then ``locked``;
+        ``parameters``: the ``scale`` applied to the given body; ``height_m``: the body's now."""
+        return {"id": self.body_id, "state": "locked" if self.locked else "collecting",
+                "frames": min(len(self.factors), ESTIMATES), "needed": ESTIMATES,
+                "parameters": {"scale": round(self.factor, 4)}, "height_m": round(self.body.height, 4)}
+
     def height_state(self) -> dict:
         """The state of the measure (see the class docstring)."""
         return {"id": self.body_id, "state": "locked" if self.locked else "measuring",

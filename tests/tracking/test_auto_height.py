@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import ValidatingSink
 
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import ANGLE_NAMES, EVAL_JOINTS
@@ -246,3 +247,41 @@ def test_the_bvh_animates_the_scaled_body(tmp_path):
     to_bvh = bvh_transform(first)
     np.testing.assert_allclose(positions[0, order], 100.0 * (expected[0] @ to_bvh[:3, :3].T + to_bvh[:3, 3]),
                                atol=0.05)
+
+
+def test_status_and_info_report_the_height_as_a_personalisation(tmp_path, capsys):
+    """A worker run of a 1.55 m built-in subject with the default body: the statuses (valid
+    against the schemas) go from collecting to locked, with the scale applied and the body's
+    height (oracle: the subject's stature, within 3 cm), and the info message says the same."""
+    from contextlib import ExitStack
+
+    from swarmpose.cli.main import main
+    from swarmpose.messages import validate
+    from swarmpose.messages.build import info_message
+    from swarmpose.pipeline.config import ServiceConfig
+    from swarmpose.pipeline.service import open_parts
+    from swarmpose.pipeline.worker import Worker
+    from swarmpose.sources.registry import open_source
+
+    seq = tmp_path / "short"
+    assert main(["synth", "--body", "builtin", "--shape", "height=1.55", "--motion", "builtin:walk", "--frames", "14",
+                 "--out", str(seq), "--quiet"]) == 0
+    capsys.readouterr()
+    uri = f"folder:{seq}"
+    config = ServiceConfig(source=uri, tracker=TrackerConfig(particles=16, generations=16, max_people=1))
+    sink = ValidatingSink()
+    with ExitStack() as stack:
+        parts = open_parts(config, stack)
+        worker = Worker(lambda: open_source(uri), parts.pipeline, [sink], camera="test", drop_stale=False,
+                        source_uri=uri, status_period_s=0.05, source=parts.source)
+        worker.run()
+        bodies = [(s["tracker"].get("personalisation", {}).get("bodies") or [{}])[0] for s in sink.statuses]
+        states = [b.get("state") for b in bodies]
+        assert "collecting" in states and states[-1] == "locked", states
+        locked = bodies[-1]
+        assert locked["frames"] == locked["needed"] == ESTIMATES
+        assert locked["height_m"] == pytest.approx(1.55, abs=0.03), locked
+        assert locked["parameters"]["scale"] == pytest.approx(locked["height_m"] / parts.body.height, abs=1e-3)
+        info = validate(info_message("test", body=parts.pipeline.tracker.body, body_spec=config.body,
+                                     personalisation=parts.pipeline.personalisation))
+        assert info["body"]["personalisation"]["bodies"][0] == locked
