@@ -115,6 +115,14 @@ def track_sequence(path: Path, mode: str, detector: str, shape: str, assets: Pat
     return record, run.estimates, run.truth
 
 
+def variant_settings(tracker: dict, mode: str, shape: str) -> dict:
+    """The tracker settings a variant's record is made and resumed with: ``auto_height`` on unless
+    ``tracker`` turns it off, and off where it does nothing (a given shape, the lift mode), so that
+    records made before the setting existed still match there."""
+    applies = tracker.get("auto_height", True) and shape == "default" and mode != "lift"
+    return {**tracker, "auto_height": bool(applies)}
+
+
 def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[str, ...] = ("simulated",),
                 shapes: tuple[str, ...] = ("default",), frames: int = 0, tracker: dict | None = None,
                 subjects: tuple[str, ...] = SUBJECTS, actions: tuple[int, ...] = (),
@@ -139,9 +147,10 @@ def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[s
     with progress_bar("bench utdmhad", len(todo), enabled=progress, unit="sequence") as bar:
         for path, mode, detector, shape in todo:
             stem = f"{path.name.removesuffix('_depth.mat')}-{variant_name(mode, detector, shape)}"
-            stored = _read(results / stem, frames, tracker)
+            settings = variant_settings(tracker, mode, shape)
+            stored = _read(results / stem, frames, settings)
             if stored is None:
-                record, estimates, truth = track_sequence(path, mode, detector, shape, root, tracker, frames)
+                record, estimates, truth = track_sequence(path, mode, detector, shape, root, settings, frames)
                 tmp = results / f"{stem}.tmp.npz"
                 np.savez(tmp, estimates=estimates, truth=truth)
                 os.replace(tmp, results / f"{stem}.npz")

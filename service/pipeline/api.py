@@ -117,7 +117,8 @@ class Tracker:
         return self.pipeline.process(frame)
 
     def reset(self) -> None:
-        """Forget the tracks: the next frame starts from its detections."""
+        """Forget the tracks and the heights measured for their people: the next frame starts
+        from its detections."""
         self.pipeline.reset()
 
     def close(self) -> None:

@@ -288,9 +288,9 @@ class FramePipeline:
         return self.track(item, self.detect(item), received_ns)
 
     def reset(self) -> None:
-        """Forget the tracks and the detector's box."""
+        """Forget the tracks, the bodies fitted to their people and the detector's box."""
         if self.tracker is not None:
-            self.tracker.reset()
+            self.tracker.new_person()
         if self.people is not None:
             self.people.reset()
         with self._box_lock:

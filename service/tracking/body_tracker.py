@@ -138,11 +138,11 @@ class BodyTracker:
         """Track with ``body`` from now on: another shape of this tracker's body with the same
         tracking topology (a :class:`~swarmpose.body.shape_space.ShapeSpace`'s tracking body).
         The track goes on from the last pose."""
-        self.body = body
-        if self.objective is not None:
+        if self.objective is not None:  # first: a body the scorer refuses leaves the tracker as it was
             self.objective.set_body(body)
-            if self.objective.coarse is not None:
-                self.objective.coarse = self._coarse_scorer(self.objective.scorer.cl_context)
+        self.body = body
+        if self.objective is not None and self.objective.coarse is not None:
+            self.objective.coarse = self._coarse_scorer(self.objective.scorer.cl_context)
 
     def _coarse_scorer(self, context: ClContext) -> ParticleScorer | None:
         """The coarse level's scorer of :attr:`body` (coarse-to-fine search), None when it is off."""

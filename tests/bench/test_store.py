@@ -32,3 +32,23 @@ def test_a_record_made_without_flips_does_not_resume_a_default_run(tmp_path):
     write_record(path, {"mpjpe_mm": 61.0, **tracker_settings({"limb_flips": False})})
     assert read_record(path, tracker_settings(None)) is None
     assert read_record(path, tracker_settings({"limb_flips": False}))["mpjpe_mm"] == 61.0
+
+
+def test_utdmhad_records_carry_the_automatic_height_only_where_it_acts(tmp_path):
+    """A UTD-MHAD record made before the automatic height (no key) resumes a run without it, and
+    a run with it only for the variants it does not act on (a given shape, the lift mode); a
+    default-shape record made with it does not resume a run without it."""
+    from swarmpose.bench.utdmhad import variant_settings
+
+    on, off = tracker_settings({"auto_height": True}), tracker_settings({"auto_height": False})
+    old = tmp_path / "old.json"
+    write_record(old, {"mpjpe_mm": 70.0, **tracker_settings(None)})  # no auto_height key
+    assert read_record(old, variant_settings(off, "hybrid", "default"))["mpjpe_mm"] == 70.0
+    assert read_record(old, variant_settings(on, "hybrid", "default")) is None
+    assert read_record(old, variant_settings(on, "hybrid", "measured"))["mpjpe_mm"] == 70.0
+    assert read_record(old, variant_settings(on, "lift", "default"))["mpjpe_mm"] == 70.0
+    assert variant_settings(tracker_settings(None), "hybrid", "default")["auto_height"] is True  # the default
+    new = tmp_path / "new.json"
+    write_record(new, {"mpjpe_mm": 64.0, **variant_settings(on, "hybrid", "default")})
+    assert read_record(new, variant_settings(off, "hybrid", "default")) is None
+    assert read_record(new, variant_settings(on, "hybrid", "default"))["mpjpe_mm"] == 64.0

@@ -1,7 +1,6 @@
 """The automatic height (:mod:`swarmpose.tracking.auto_height`): the uniform scale against the
-built-in body built at another stature, the upright test by hand, the stature ratio against a
-ray-cast subject of known height standing on a floor before a wall, and a tracker that finds a
-short subject's height and tracks them better for it."""
+built-in body built at another stature, when it applies, a tracker that finds a short subject's
+height and tracks them better for it, the BVH of the scaled body, and status and info."""
 
 from __future__ import annotations
 
@@ -11,22 +10,10 @@ from conftest import ValidatingSink
 
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import ANGLE_NAMES, EVAL_JOINTS
-from swarmpose.core.camera import Intrinsics
-from swarmpose.tracking.auto_height import (
-    ESTIMATES,
-    FACTOR_LIMITS,
-    HeightFittingTracker,
-    applies,
-    lifted_upright,
-    person_stature,
-    scaled_body,
-    upright,
-)
+from swarmpose.tracking.auto_height import ESTIMATES, FACTOR_LIMITS, HeightFittingTracker, applies, scaled_body
 from swarmpose.tracking.config import TrackerConfig
 
 FACING = (0.0, 1.0, 0.0, 0.0)  # upright, facing the camera (OpenCV axes: y down)
-K = Intrinsics(width=320, height=240, fx=262.5, fy=262.5, cx=159.5, cy=119.5)
-
 
 def test_a_scaled_builtin_body_is_the_builtin_body_built_at_that_stature():
     """Oracle: the parametric body constructed from scratch at 1.55 m (every length of the
@@ -43,115 +30,6 @@ def test_a_scaled_builtin_body_is_the_builtin_body_built_at_that_stature():
     np.testing.assert_allclose(scaled.posed_points(pose[None], joints), built.posed_points(pose[None], joints),
                                atol=5e-4)
     np.testing.assert_allclose(scaled.posed_points(pose[None]), built.posed_points(pose[None]), atol=0.01)
-
-
-def _bent(body, joint: str, angle: float) -> np.ndarray:
-    pose = body.rest_pose(translation=(0.0, 0.0, 3.0), quaternion=FACING)
-    pose[7 + ANGLE_NAMES.index(joint)] = angle
-    return pose
-
-
-def test_upright_by_hand():
-    """The rest pose stands; a knee bent by 0.6 rad or a thigh swung forward by 0.6 rad (both
-    beyond the 0.45 rad bound) still stands on the other leg, both legs so bent do not; 0.3 rad
-    of either still stands."""
-    body = load_body("builtin")
-    assert upright(body, body.rest_pose(translation=(0.0, 0.0, 3.0), quaternion=FACING))
-    knee, hip = "left_knee.pitch", "right_hip.pitch"  # knee: < 0 flexes; hip: > 0 swings the thigh forward
-    assert upright(body, _bent(body, knee, -0.6))  # on the right leg
-    assert upright(body, _bent(body, hip, 0.6))  # on the left leg
-    both_knees = _bent(body, knee, -0.6)
-    both_knees[7 + ANGLE_NAMES.index("right_knee.pitch")] = -0.6
-    assert not upright(body, both_knees)
-    both_thighs = _bent(body, hip, 0.6)
-    both_thighs[7 + ANGLE_NAMES.index("left_hip.pitch")] = 0.6
-    assert not upright(body, both_thighs)
-    assert upright(body, _bent(body, knee, -0.3))
-    assert upright(body, _bent(body, hip, 0.3))
-
-
-def test_lifted_upright_by_hand():
-    """Lifted joints (camera axes, y down) of a person standing, seated facing the camera (thighs
-    pointing at it) and squatting; only the standing one is upright; a leg without depth does
-    not count."""
-    up = np.array([0.0, -1.0, 0.0])
-    names = ("left_hip", "left_knee", "left_ankle", "right_hip", "right_knee", "right_ankle")
-    standing = np.array([[0.1, 0.0, 3.0], [0.1, 0.45, 3.0], [0.1, 0.88, 3.05],
-                         [-0.1, 0.0, 3.0], [-0.1, 0.45, 2.9], [-0.1, 0.88, 2.95]])
-    seated = np.array([[0.1, 0.4, 3.0], [0.1, 0.42, 2.55], [0.1, 0.85, 2.6],
-                       [-0.1, 0.4, 3.0], [-0.1, 0.42, 2.55], [-0.1, 0.85, 2.6]])
-    squatting = np.array([[0.1, 0.5, 3.0], [0.3, 0.55, 2.6], [0.15, 0.9, 2.9],
-                          [-0.1, 0.5, 3.0], [-0.3, 0.55, 2.6], [-0.15, 0.9, 2.9]])
-    assert lifted_upright(names, standing, up)
-    assert not lifted_upright(names, seated, up)
-    assert not lifted_upright(names, squatting, up)
-    no_depth = standing.copy()
-    no_depth[[1, 4]] = np.nan  # both knees without depth
-    assert not lifted_upright(names, no_depth, up)
-
-
-def _scene_depth(subject, pose: np.ndarray, wall_m: float | None, plate: bool = False) -> np.ndarray:
-    """(H, W) m: ``subject`` at ``pose`` ray-cast by Open3D, with a floor under its soles and a
-    wall ``wall_m`` behind it (None: the person alone, as on background-free depth; 0: no hit);
-    ``plate``: a 25 x 30 cm plate tilted by 25 degrees beside the feet instead."""
-    import open3d as o3d
-
-    verts = subject.pose(pose[None], "dqs")[0]
-    meshes = [(verts, subject.triangles)]
-    if plate:
-        sole, z = float(verts[:, 1].max()), float(pose[2])
-        x = float(verts[verts[:, 1] > sole - 0.1, 0].max()) + 0.02  # just beside the outer foot
-        rise = 0.25 * np.tan(0.44)  # 25 degrees: flat enough to look like a floor, too tilted to be one
-        corners = [[x, sole, z - 0.15], [x + 0.25, sole - rise, z - 0.15], [x + 0.25, sole - rise, z + 0.15],
-                   [x, sole, z + 0.15]]
-        meshes.append((np.array(corners), np.array([[0, 1, 2], [0, 2, 3]])))
-    if wall_m is not None:
-        sole = float(verts[:, 1].max())  # y points down: the lowest point of the body
-        back = float(pose[2]) + wall_m
-        quad = np.array([[0, 1, 2], [0, 2, 3]])
-        meshes += [(np.array([[-5, sole, 0.5], [5, sole, 0.5], [5, sole, 9], [-5, sole, 9]]), quad),
-                   (np.array([[-5, -5, back], [5, -5, back], [5, sole, back], [-5, sole, back]]), quad)]
-    scene = o3d.t.geometry.RaycastingScene()
-    for v, t in meshes:
-        scene.add_triangles(o3d.core.Tensor(np.asarray(v, np.float32)), o3d.core.Tensor(np.asarray(t, np.uint32)))
-    cols, rows = np.meshgrid(np.arange(K.width) + 0.0, np.arange(K.height) + 0.0)
-    dirs = np.stack([(cols - K.cx) / K.fx, (rows - K.cy) / K.fy, np.ones_like(cols)], -1)
-    rays = np.concatenate([np.zeros_like(dirs), dirs], -1).astype(np.float32)
-    hit = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()  # along rays of unit z: the depth
-    return np.where(np.isfinite(hit), hit, 0.0).astype(np.float32)
-
-
-@pytest.mark.parametrize("height", [1.50, 1.62, 1.95])
-@pytest.mark.parametrize("wall_m", [None, 0.8])
-def test_the_stature_is_the_subjects_with_and_without_a_room(height, wall_m):
-    """Oracle: a built-in subject of known stature ray-cast (Open3D), alone or standing on a floor
-    0.8 m before a wall, one hand raised above the head, seen by the default 1.75 m body at the
-    same pose: the stature is the subject's within 2 % (the wall, the floor and the hand left out)."""
-    body = load_body("builtin").tracking_lod(1500)
-    subject = load_body("builtin", f"height={height}")
-    pose = body.rest_pose(translation=(0.0, 0.1, 3.2), quaternion=FACING)
-    pose[7 + ANGLE_NAMES.index("left_shoulder.roll")] = 2.8  # the arm up, the hand above the head
-    stature = person_stature(body, pose, _scene_depth(subject, pose, wall_m), K)
-    assert stature == pytest.approx(subject.height, rel=0.02)
-
-
-def test_a_few_flat_pixels_beside_the_feet_are_no_floor():
-    """A plate tilted by 25 degrees beside the feet of a subject alone (no floor): its pixels
-    must not pass for a floor (whose plane would set the axis and the soles' level): the stature
-    stays within 2 %."""
-    body = load_body("builtin").tracking_lod(1500)
-    subject = load_body("builtin", "height=1.62")
-    pose = body.rest_pose(translation=(0.0, 0.1, 3.2), quaternion=FACING)
-    stature = person_stature(body, pose, _scene_depth(subject, pose, None, plate=True), K)
-    assert stature == pytest.approx(subject.height, rel=0.02)
-
-
-def test_no_stature_without_a_person_in_the_depth():
-    body = load_body("builtin").tracking_lod(1500)
-    pose = body.rest_pose(translation=(0.0, 0.1, 3.2), quaternion=FACING)
-    assert person_stature(body, pose, np.zeros((K.height, K.width), np.float32), K) is None
-    far_away = body.rest_pose(translation=(0.0, 0.1, 300.0), quaternion=FACING)  # a few pixels at most
-    assert person_stature(body, far_away, np.full((K.height, K.width), 3.0, np.float32), K) is None
 
 
 def test_it_applies_only_to_a_body_whose_shape_was_not_given():
@@ -189,7 +67,7 @@ def test_a_tracker_finds_a_short_subjects_height_and_tracks_better_for_it(tmp_pa
     source = open_source(str(seq))
     frames = list(source)
     detector = make_detector("simulated", source)
-    tracker = HeightFittingTracker(load_body("builtin").tracking_lod(1500), frames[0].intrinsics,
+    tracker = HeightFittingTracker(load_body("builtin"), frames[0].intrinsics,  # full resolution: it decimates
                                    TrackerConfig(particles=32, generations=32, max_people=1))
     for frame in frames:
         tracker.step(frame, detector.detect(frame))

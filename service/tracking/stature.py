@@ -1,0 +1,309 @@
+"""A standing person's stature measured on the depth, where a fitted body says where to look.
+
+Used by the automatic height (:mod:`swarmpose.tracking.auto_height`; the method, and why the
+fitted model's own size stays out of it, are in its docstring). :func:`person_stature` measures
+one frame; :func:`upright` and :func:`lifted_upright` say whether a frame may be measured.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from swarmpose.body.kinematics import quaternion_to_matrix
+from swarmpose.body.skinned import SkinnedBody
+from swarmpose.core.camera import Intrinsics
+from swarmpose.gpu.reference import raycast_tiles
+from swarmpose.gpu.tile import TileBox
+
+UPRIGHT_MAX_RAD = 0.45
+"""An upright pose: a leg whose knee is bent, and whose thigh is away from the line down the
+torso, by at most this (rad, about 26 degrees) ..."""
+LIFTED_MAX_RAD = 0.6
+"""... and the lifted joints agree: a thigh and a shin within this (rad, about 34 degrees) of the
+line down (they are noisier than the fitted pose)."""
+PERCENTILES = (0.5, 99.5)
+"""The lowest and highest of a set of points along the axis (percent of them), against stray pixels."""
+GROW_DOWN_UP = 0.15
+"""The model's silhouette is grown by this share of its pixel height up and down."""
+GROW_SIDEWAYS = 0.05
+"""... and by this share of its pixel height to the sides."""
+DEPTH_BAND_M = 0.35
+"""The person's points lie within this of the model's median depth (m)."""
+MIN_PIXELS = 300
+"""Fewest pixels of the model and of the person a measure needs."""
+HAND_RADIUS_M = 0.10
+"""Points this close (m) to a fitted forearm and hand are not the head: a hand raised over it ..."""
+HAND_LENGTH_M = 0.18
+"""... the hand reaching this far (m) beyond the wrist ..."""
+HAND_ON_HEAD_M = 0.20
+"""... and no measure at all while a fitted wrist is this close (m) to the head's centre (a hand on
+the head)."""
+EDGE_JUMP_M = 0.05
+"""Two neighbours of a pixel (two pixels apart) whose depths differ by more than this (m) ..."""
+EDGE_JUMP_SHARE = 0.08
+"""... and this share of its depth lie on two surfaces (a floor seen at a grazing angle steps by
+z / (f h) of its depth a row: 1.4 % at 3.2 m, 0.9 m under a 262-pixel focal length)."""
+FLAT_MAX_RAD = 0.5
+"""Surfaces whose normal is within this (rad) of the up axis are flat: a floor's candidates."""
+END_RADIUS_M = {"head": 0.15, "left_ankle": 0.25, "right_ankle": 0.25}
+"""The top of the head, and the soles where no floor is seen, are looked for within this distance
+(m) of the lines along the axis through the model's head and ankles (the toes lie up to 20 cm
+in front of an ankle) ..."""
+END_PIXELS = 20
+"""... among at least this many pixels (the head's above the fitted neck, the feet's below the
+fitted knees)."""
+UPRIGHT_SHARE = 0.994
+"""The height of the top of the head above the soles of an upright person (the 99.5th percentile
+of the head's points), as a share of their stature. Calibrated on four built-in subjects
+tracked by the 1.75 m body (1.55-1.95 m; walk, wave, squat; simulated Kinect noise, a floor in
+view), whose statures came out 0.6 % short to 0.3 % tall with a share of 1 (0.994: their mean)."""
+HIDDEN_SOLE_SHARE = 0.008
+"""Without a floor, how much of the stature lies below the lowest points seen of the feet: a camera
+above them sees their tops and fronts, not the soles' edge (ray-cast subjects of 1.50-1.95 m
+standing alone measured 0.6-0.9 % shorter than on a floor)."""
+FLOOR_SHARE = 0.2
+"""A floor is looked for in the lowest share of the person's extent ..."""
+FLOOR_PIXELS = 100
+"""... and seen when at least this many flat pixels outside the model's render lie there ..."""
+FLOOR_INLIER_M = 0.02
+"""... within this (m) of the RANSAC plane through them ..."""
+FLOOR_RANSAC_ITERATIONS = 100
+"""(RANSAC's hypotheses)"""
+FLOOR_BELOW_FEET_M = (0.05, 0.10)
+"""... and the feet's lowest points are at most the first (m) below it and the second above it
+(a step or a table is no floor under the feet) ..."""
+FLOOR_MAX_TILT_RAD = 0.35
+"""... and the plane through them is within this (rad, 20 degrees) of lying across the fitted torso
+(on UTD-MHAD's background-free depth, 30-40 flat pixels around the shoes made planes at any angle)."""
+
+
+_LEGS = ("mid_hip", "neck", "left_hip", "left_knee", "left_ankle", "right_hip", "right_knee", "right_ankle")
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle (rad) between vectors ``a`` and ``b`` (3,)."""
+    cos = float(a @ b) / max(float(np.linalg.norm(a) * np.linalg.norm(b)), 1e-9)
+    return float(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def upright(body: SkinnedBody, pose: np.ndarray, max_rad: float = UPRIGHT_MAX_RAD) -> bool:
+    """Whether ``body`` at ``pose`` (36,) stands upright on at least one leg: a knee bent by at
+    most ``max_rad`` whose thigh is within ``max_rad`` of the line from the neck down to the mid
+    hip (a walk's swing leg bends far more, the stance leg does not)."""
+    p = dict(zip(_LEGS, body.posed_points(np.asarray(pose, float)[None], _LEGS)[0]))
+    down = p["mid_hip"] - p["neck"]
+    for side in ("left", "right"):
+        thigh = p[f"{side}_knee"] - p[f"{side}_hip"]
+        shin = p[f"{side}_ankle"] - p[f"{side}_knee"]
+        if _angle(thigh, shin) <= max_rad and _angle(thigh, down) <= max_rad:
+            return True
+    return False
+
+
+def lifted_upright(names: tuple[str, ...], xyz: np.ndarray, up: np.ndarray, max_rad: float = LIFTED_MAX_RAD) -> bool:
+    """Whether the lifted joints J^e (``names``, ``xyz`` (n, 3) m, NaN rows: no depth) stand upright
+    on at least one leg: its thigh (hip to knee) and shin (knee to ankle) both within ``max_rad``
+    of ``-up`` (3,). The detection's own view, beside the fitted pose's: a seated person seen from
+    the front, whose thighs point at the camera, can be fitted with straight legs."""
+    at = {n: p for n, p in zip(names, np.asarray(xyz, float)) if np.all(np.isfinite(p))}
+    for side in ("left", "right"):
+        hip, knee, ankle = (at.get(f"{side}_{j}") for j in ("hip", "knee", "ankle"))
+        if hip is None or knee is None or ankle is None:
+            continue
+        if _angle(knee - hip, -up) <= max_rad and _angle(ankle - knee, -up) <= max_rad:
+            return True
+    return False
+
+
+def person_mask(observed: np.ndarray, model: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the observed pixels of the person around the model's render (see the module
+    docstring). observed, model: (H, W) depth m, NaN or 0 where none."""
+    hit = model > 0
+    rows = np.flatnonzero(hit.any(axis=1))
+    tall = int(rows[-1] - rows[0] + 1)
+    kernel = np.ones((2 * int(GROW_DOWN_UP * tall) + 1, 2 * int(GROW_SIDEWAYS * tall) + 1), np.uint8)
+    around = cv2.dilate(hit.astype(np.uint8), kernel).astype(bool)
+    near = float(np.median(model[hit]))
+    with np.errstate(invalid="ignore"):
+        return around & np.isfinite(observed) & (observed > 0) & (np.abs(observed - near) < DEPTH_BAND_M)
+
+
+def _points(depth: np.ndarray, intrinsics: Intrinsics, corner: tuple[int, int] = (0, 0)) -> np.ndarray:
+    """(h, w, 3) m: every pixel of ``depth`` (h, w) m back-projected (OpenCV camera axes), the
+    window's top-left pixel being the image's ``corner`` (column, row)."""
+    rows, cols = np.indices(depth.shape, dtype=np.float64)
+    rows, cols = rows + corner[1], cols + corner[0]
+    z = depth.astype(np.float64)
+    return np.stack([(cols - intrinsics.cx) * z / intrinsics.fx, (rows - intrinsics.cy) * z / intrinsics.fy, z], -1)
+
+
+def _window(verts: np.ndarray, intrinsics: Intrinsics) -> TileBox | None:
+    """The image window (whole pixels) that holds the projection of ``verts`` (V, 3) m and the
+    growth of :func:`person_mask` around it, plus a pixel for the normals' neighbours; None when
+    the body is behind the camera or outside the image."""
+    if np.any(verts[:, 2] <= 1e-3):
+        return None
+    uv = intrinsics.project(verts)
+    (u_lo, v_lo), (u_hi, v_hi) = np.floor(uv.min(axis=0)), np.ceil(uv.max(axis=0))
+    tall = v_hi - v_lo + 1
+    grow_u, grow_v = int(GROW_SIDEWAYS * tall) + 2, int(GROW_DOWN_UP * tall) + 2
+    u0, v0 = int(max(u_lo - grow_u, 0)), int(max(v_lo - grow_v, 0))
+    u1, v1 = int(min(u_hi + grow_u + 1, intrinsics.width)), int(min(v_hi + grow_v + 1, intrinsics.height))
+    if u1 <= u0 or v1 <= v0:
+        return None
+    return TileBox(u0, v0, u1 - u0, v1 - v0, u1 - u0, v1 - v0)
+
+
+def facing_along(points: np.ndarray, axis: np.ndarray, max_rad: float = FLAT_MAX_RAD) -> np.ndarray:
+    """(H, W) bool: the pixels of ``points`` (H, W, 3) m whose surface normal (from the central
+    differences of their neighbours) lies within ``max_rad`` of unit ``axis`` (3,), either way:
+    surfaces across the axis, such as the floor under an upright person. A pixel with a neighbour
+    without depth, or whose neighbours' depths differ by more than :data:`EDGE_JUMP_M` or
+    :data:`EDGE_JUMP_SHARE` of its depth, is on an edge and has no normal."""
+    across = np.zeros_like(points)
+    down = np.zeros_like(points)
+    across[:, 1:-1] = points[:, 2:] - points[:, :-2]
+    down[1:-1] = points[2:] - points[:-2]
+    z = points[..., 2]
+    jump = np.maximum(EDGE_JUMP_M, EDGE_JUMP_SHARE * z)  # a neighbour beyond it is another surface
+    smooth = np.zeros(z.shape, bool)
+    smooth[1:-1, 1:-1] = ((z[1:-1, 1:-1] > 0) & (z[1:-1, 2:] > 0) & (z[1:-1, :-2] > 0) & (z[2:, 1:-1] > 0)
+                          & (z[:-2, 1:-1] > 0) & (np.abs(across[1:-1, 1:-1, 2]) < jump[1:-1, 1:-1])
+                          & (np.abs(down[1:-1, 1:-1, 2]) < jump[1:-1, 1:-1]))
+    normal = np.cross(across, down)
+    length = np.linalg.norm(normal, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos = np.abs(normal @ axis) / length
+    return smooth & (np.nan_to_num(cos) > np.cos(max_rad))
+
+
+def ransac_plane_inliers(points: np.ndarray, within: float, hypotheses: int, seed: int = 0) -> np.ndarray:
+    """The points (M, 3) of ``points`` (N, 3) m within ``within`` (m) of the plane through three of
+    them that has the most such points, out of ``hypotheses`` random triples drawn by a generator
+    of its own seeded with ``seed``. Not Open3D's ``segment_plane``: that draws from one
+    process-wide generator, which the floor fit of the detection thread (:mod:`swarmpose.detect.floor`)
+    seeds and draws from at the same time, so neither would repeat."""
+    if len(points) < 3:
+        return points[:0]
+    triples = points[np.random.default_rng(seed).integers(0, len(points), (hypotheses, 3))]
+    normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
+    length = np.linalg.norm(normals, axis=1)
+    good = length > 1e-12
+    if not np.any(good):
+        return points[:0]
+    normals, anchors = normals[good] / length[good, None], triples[good, 0]
+    near = np.abs((points[None] - anchors[:, None]) @ normals[..., None])[..., 0] < within  # (K, N)
+    return points[near[int(np.argmax(near.sum(axis=1)))]]
+
+
+def floor_plane(points: np.ndarray, up: np.ndarray, mask: np.ndarray, hit: np.ndarray,
+                flat: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """The floor under the person, None when none is seen: (unit normal (3,) on the side of ``up``,
+    level: the normal's dot product with the floor's points, m). Its points are the flat pixels
+    (``flat``) of ``mask`` outside the model's render ``hit`` in the lowest :data:`FLOOR_SHARE` of
+    the person's extent along ``up``; the plane is the RANSAC plane among them
+    (:func:`ransac_plane_inliers`: the tops of shoes beside the model are flat too) refitted by
+    least squares (SVD) to its inliers, at least :data:`FLOOR_PIXELS` of them, and a floor only
+    when it is within :data:`FLOOR_MAX_TILT_RAD` of lying across ``up``."""
+    along = np.nan_to_num(points @ up)
+    low, high = np.percentile(along[mask], PERCENTILES)
+    floor = mask & flat & ~hit & (along < low + FLOOR_SHARE * (high - low))
+    if floor.sum() < FLOOR_PIXELS:
+        return None
+    on = ransac_plane_inliers(points[floor], FLOOR_INLIER_M, FLOOR_RANSAC_ITERATIONS)
+    if len(on) < FLOOR_PIXELS:
+        return None
+    centre = on.mean(axis=0)
+    normal = np.linalg.svd(on - centre, full_matrices=False)[2][2]
+    normal = normal if normal @ up > 0 else -normal
+    if _angle(normal, up) > FLOOR_MAX_TILT_RAD:  # a few flat pixels that are no floor (shoes, noise)
+        return None
+    return normal, float(centre @ normal)
+
+
+_MARKS = ("head", "neck", "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_knee", "right_knee",
+          "left_ankle", "right_ankle")
+
+
+def _near_axis(points: np.ndarray, along: np.ndarray, point: np.ndarray, axis: np.ndarray,
+               radius: float) -> np.ndarray:
+    """(N,) bool: which ``points`` (N, 3) m (``along``: their dot products with unit ``axis``) lie
+    within ``radius`` (m) of the line through ``point`` (3,) along ``axis``."""
+    across = points - point - np.outer(along - point @ axis, axis)
+    return np.linalg.norm(across, axis=1) < radius
+
+
+def _near_forearms(points: np.ndarray, marks: dict[str, np.ndarray]) -> np.ndarray:
+    """(N,) bool: which ``points`` (N, 3) m lie within :data:`HAND_RADIUS_M` of a fitted forearm
+    (the segment from elbow to wrist, prolonged by the hand's length) in ``marks``."""
+    near = np.zeros(len(points), bool)
+    for side in ("left", "right"):
+        elbow, wrist = marks[f"{side}_elbow"], marks[f"{side}_wrist"]
+        forearm = wrist - elbow
+        length = float(np.linalg.norm(forearm))
+        if length < 1e-6:
+            continue
+        tip = wrist + forearm * (HAND_LENGTH_M / length)
+        t = np.clip((points - elbow) @ (tip - elbow) / float((tip - elbow) @ (tip - elbow)), 0.0, 1.0)
+        near |= np.linalg.norm(points - (elbow + t[:, None] * (tip - elbow)), axis=1) < HAND_RADIUS_M
+    return near
+
+
+def person_stature(body: SkinnedBody, pose: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics) -> float | None:
+    """The stature (m) of the person in ``depth`` (H, W) m whom ``body`` was fitted to at ``pose``
+    (36,): the height of the top of the head above the floor where a floor is seen under the feet
+    (along its normal), over :data:`UPRIGHT_SHARE`; else above the lowest points of the feet
+    (along the fitted torso's up axis), over :data:`UPRIGHT_SHARE` less :data:`HIDDEN_SOLE_SHARE`.
+    The head is the person's points above the fitted neck within :data:`END_RADIUS_M` of the line
+    along the axis through the fitted head, the feet those below the fitted knees near the lines
+    through the ankles; the top and the lowest points are their :data:`PERCENTILES`.
+
+    The points near the fitted forearms and hands (:func:`_near_forearms`) are left out of the
+    head: a hand raised over it would pass for its top. None (no measure) when the model or the
+    person covers fewer than :data:`MIN_PIXELS` pixels, the head or the feet fewer than
+    :data:`END_PIXELS`, a fitted wrist is within :data:`HAND_ON_HEAD_M` of the head, or the head
+    or the feet touch the image's border (cut off, they would be measured short)."""
+    pose = np.asarray(pose, float)
+    verts = body.pose(pose[None], "dqs")[0]
+    window = _window(verts, intrinsics)
+    if window is None:
+        return None
+    up = quaternion_to_matrix(pose[3:7])[:, 1]
+    marks = dict(zip(_MARKS, body.posed_points(pose[None], _MARKS)[0]))
+    if min(np.linalg.norm(marks[f"{side}_wrist"] - marks["head"]) for side in ("left", "right")) < HAND_ON_HEAD_M:
+        return None
+    model = raycast_tiles(verts[None], np.asarray(body.triangles), window.rays(intrinsics))[0]
+    hit = model > 0
+    if hit.sum() < MIN_PIXELS:
+        return None
+    u0, v0 = int(window.u0), int(window.v0)
+    depth = np.asarray(depth, np.float32)[v0:v0 + window.th, u0:u0 + window.tw]
+    mask = person_mask(depth, model)
+    if mask.sum() < MIN_PIXELS:
+        return None
+    seen = _points(depth, intrinsics, (u0, v0))
+    floor = floor_plane(seen, up, mask, hit, facing_along(seen, up))
+    axis = up if floor is None else floor[0]
+    rows = np.nonzero(mask)[0] + v0
+    person = seen[mask]
+    along = person @ axis
+    head = (_near_axis(person, along, marks["head"], axis, END_RADIUS_M["head"])
+            & (along > marks["neck"] @ axis) & ~_near_forearms(person, marks))
+    knees = min(marks["left_knee"] @ axis, marks["right_knee"] @ axis)
+    feet = ((_near_axis(person, along, marks["left_ankle"], axis, END_RADIUS_M["left_ankle"])
+             | _near_axis(person, along, marks["right_ankle"], axis, END_RADIUS_M["right_ankle"]))
+            & (along < knees))
+    if head.sum() < END_PIXELS or feet.sum() < END_PIXELS:
+        return None
+    if rows[head].min() == 0 or rows[feet].max() == intrinsics.height - 1:
+        return None
+    top = float(np.percentile(along[head], PERCENTILES[1]))
+    soles = float(np.percentile(along[feet], PERCENTILES[0]))
+    if floor is not None and -FLOOR_BELOW_FEET_M[0] <= soles - floor[1] <= FLOOR_BELOW_FEET_M[1]:
+        return (top - floor[1]) / UPRIGHT_SHARE
+    if floor is not None:  # a plane, but not the one the feet stand on (a step, a table): along the torso
+        along = person @ up
+        top, soles = float(np.percentile(along[head], PERCENTILES[1])), float(np.percentile(along[feet],
+                                                                                           PERCENTILES[0]))
+    return (top - soles) / (UPRIGHT_SHARE - HIDDEN_SOLE_SHARE)

@@ -1,0 +1,171 @@
+"""The stature measure of the automatic height (:mod:`swarmpose.tracking.stature`): the upright
+tests by hand, and the stature against ray-cast (Open3D) subjects of known height alone, on a
+floor before a wall, beside a tilted plate, with a hand over or on the head, and cut off by the
+image's border."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from swarmpose.body.loader import load_body
+from swarmpose.body.skeleton import ANGLE_NAMES
+from swarmpose.core.camera import Intrinsics
+from swarmpose.tracking import stature
+from swarmpose.tracking.stature import lifted_upright, person_stature, upright
+
+FACING = (0.0, 1.0, 0.0, 0.0)  # upright, facing the camera (OpenCV axes: y down)
+K = Intrinsics(width=320, height=240, fx=262.5, fy=262.5, cx=159.5, cy=119.5)
+
+
+def _bent(body, joint: str, angle: float) -> np.ndarray:
+    pose = body.rest_pose(translation=(0.0, 0.0, 3.0), quaternion=FACING)
+    pose[7 + ANGLE_NAMES.index(joint)] = angle
+    return pose
+
+
+def test_upright_by_hand():
+    """The rest pose stands; a knee bent by 0.6 rad or a thigh swung forward by 0.6 rad (both
+    beyond the 0.45 rad bound) still stands on the other leg, both legs so bent do not; 0.3 rad
+    of either still stands."""
+    body = load_body("builtin")
+    assert upright(body, body.rest_pose(translation=(0.0, 0.0, 3.0), quaternion=FACING))
+    knee, hip = "left_knee.pitch", "right_hip.pitch"  # knee: < 0 flexes; hip: > 0 swings the thigh forward
+    assert upright(body, _bent(body, knee, -0.6))  # on the right leg
+    assert upright(body, _bent(body, hip, 0.6))  # on the left leg
+    both_knees = _bent(body, knee, -0.6)
+    both_knees[7 + ANGLE_NAMES.index("right_knee.pitch")] = -0.6
+    assert not upright(body, both_knees)
+    both_thighs = _bent(body, hip, 0.6)
+    both_thighs[7 + ANGLE_NAMES.index("left_hip.pitch")] = 0.6
+    assert not upright(body, both_thighs)
+    assert upright(body, _bent(body, knee, -0.3))
+    assert upright(body, _bent(body, hip, 0.3))
+
+
+def test_lifted_upright_by_hand():
+    """Lifted joints (camera axes, y down) of a person standing, seated facing the camera (thighs
+    pointing at it) and squatting; only the standing one is upright; a leg without depth does
+    not count."""
+    up = np.array([0.0, -1.0, 0.0])
+    names = ("left_hip", "left_knee", "left_ankle", "right_hip", "right_knee", "right_ankle")
+    standing = np.array([[0.1, 0.0, 3.0], [0.1, 0.45, 3.0], [0.1, 0.88, 3.05],
+                         [-0.1, 0.0, 3.0], [-0.1, 0.45, 2.9], [-0.1, 0.88, 2.95]])
+    seated = np.array([[0.1, 0.4, 3.0], [0.1, 0.42, 2.55], [0.1, 0.85, 2.6],
+                       [-0.1, 0.4, 3.0], [-0.1, 0.42, 2.55], [-0.1, 0.85, 2.6]])
+    squatting = np.array([[0.1, 0.5, 3.0], [0.3, 0.55, 2.6], [0.15, 0.9, 2.9],
+                          [-0.1, 0.5, 3.0], [-0.3, 0.55, 2.6], [-0.15, 0.9, 2.9]])
+    assert lifted_upright(names, standing, up)
+    assert not lifted_upright(names, seated, up)
+    assert not lifted_upright(names, squatting, up)
+    no_depth = standing.copy()
+    no_depth[[1, 4]] = np.nan  # both knees without depth
+    assert not lifted_upright(names, no_depth, up)
+
+
+def _scene_depth(subject, pose: np.ndarray, wall_m: float | None, plate: bool = False) -> np.ndarray:
+    """(H, W) m: ``subject`` at ``pose`` ray-cast by Open3D, with a floor under its soles and a
+    wall ``wall_m`` behind it (None: the person alone, as on background-free depth; 0: no hit);
+    ``plate``: a 35 x 60 cm plate tilted by 25 degrees beside the feet instead."""
+    import open3d as o3d
+
+    verts = subject.pose(pose[None], "dqs")[0]
+    meshes = [(verts, subject.triangles)]
+    if plate:
+        sole, z = float(verts[:, 1].max()), float(pose[2])
+        x = float(verts[verts[:, 1] > sole - 0.1, 0].max()) + 0.02  # just beside the outer foot
+        rise = 0.35 * np.tan(0.44)  # 25 degrees: flat enough to look like a floor, too tilted to be one
+        corners = [[x, sole, z - 0.3], [x + 0.35, sole - rise, z - 0.3], [x + 0.35, sole - rise, z + 0.3],
+                   [x, sole, z + 0.3]]
+        meshes.append((np.array(corners), np.array([[0, 1, 2], [0, 2, 3]])))
+    if wall_m is not None:
+        sole = float(verts[:, 1].max())  # y points down: the lowest point of the body
+        back = float(pose[2]) + wall_m
+        quad = np.array([[0, 1, 2], [0, 2, 3]])
+        meshes += [(np.array([[-5, sole, 0.5], [5, sole, 0.5], [5, sole, 9], [-5, sole, 9]]), quad),
+                   (np.array([[-5, -5, back], [5, -5, back], [5, sole, back], [-5, sole, back]]), quad)]
+    scene = o3d.t.geometry.RaycastingScene()
+    for v, t in meshes:
+        scene.add_triangles(o3d.core.Tensor(np.asarray(v, np.float32)), o3d.core.Tensor(np.asarray(t, np.uint32)))
+    cols, rows = np.meshgrid(np.arange(K.width) + 0.0, np.arange(K.height) + 0.0)
+    dirs = np.stack([(cols - K.cx) / K.fx, (rows - K.cy) / K.fy, np.ones_like(cols)], -1)
+    rays = np.concatenate([np.zeros_like(dirs), dirs], -1).astype(np.float32)
+    hit = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()  # along rays of unit z: the depth
+    return np.where(np.isfinite(hit), hit, 0.0).astype(np.float32)
+
+
+@pytest.mark.parametrize("height", [1.50, 1.62, 1.95])
+@pytest.mark.parametrize("wall_m", [None, 0.8])
+def test_the_stature_is_the_subjects_with_and_without_a_room(height, wall_m):
+    """Oracle: a built-in subject of known stature ray-cast (Open3D), alone or standing on a floor
+    0.8 m before a wall, seen by the default 1.75 m body at the same pose: the stature is the
+    subject's within 2.5 % (the upright share is calibrated on walking subjects, whose heads are
+    lower than a straight rest pose's), and on the floor it is measured from the floor's plane."""
+    body = load_body("builtin").tracking_lod(1500)
+    subject = load_body("builtin", f"height={height}")
+    pose = body.rest_pose(translation=(0.0, 0.1, 3.2), quaternion=FACING)
+    depth = _scene_depth(subject, pose, wall_m)
+    assert person_stature(body, pose, depth, K) == pytest.approx(subject.height, rel=0.025)
+    floors = []
+    real = stature.floor_plane
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(stature, "floor_plane", lambda *a: floors.append(real(*a)) or floors[-1])
+        person_stature(body, pose, depth, K)
+    if wall_m is None:
+        assert floors == [None]
+    else:
+        (normal, level), = floors
+        sole = float(subject.pose(pose[None], "dqs")[0][:, 1].max())  # y down: the floor's y
+        assert np.degrees(np.arccos(abs(normal[1]))) < 1.0
+        assert level == pytest.approx(-sole, abs=0.005)  # the level along the upward normal
+
+
+@pytest.mark.parametrize("height", [1.62, 1.75])
+def test_a_hand_over_the_head_is_not_its_top(height):
+    """The left hand raised 25 cm over the head (shoulder roll 2 rad): the stature is still the
+    subject's within 2.5 %; the control, without leaving out the points near the fitted forearm,
+    measures the hand (over 15 % tall)."""
+    body = load_body("builtin").tracking_lod(1500)
+    subject = load_body("builtin", f"height={height}")
+    pose = body.rest_pose(translation=(0.0, 0.1, 3.2), quaternion=FACING)
+    pose[7 + ANGLE_NAMES.index("left_shoulder.roll")] = 2.0
+    depth = _scene_depth(subject, pose, 0.8)
+    assert person_stature(body, pose, depth, K) == pytest.approx(subject.height, rel=0.025)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(stature, "_near_forearms", lambda points, marks: np.zeros(len(points), bool))
+        assert person_stature(body, pose, depth, K) > 1.15 * subject.height
+
+
+def test_no_stature_with_a_hand_on_the_head_or_the_head_or_feet_out_of_the_image():
+    body = load_body("builtin").tracking_lod(1500)
+    on_head = body.rest_pose(translation=(0.0, 0.1, 3.2), quaternion=FACING)
+    for name, value in (("left_shoulder.roll", -1.0), ("left_shoulder.yaw", -2.5), ("left_elbow.yaw", -1.5)):
+        on_head[7 + ANGLE_NAMES.index(name)] = value
+    assert person_stature(body, on_head, _scene_depth(body, on_head, 0.8), K) is None  # the wrist 11 cm from it
+    for y in (-0.8, 0.9):  # the head above the image's top row, the feet below its bottom row
+        pose = body.rest_pose(translation=(0.0, y, 3.2), quaternion=FACING)
+        assert person_stature(body, pose, _scene_depth(body, pose, None), K) is None
+
+
+def test_a_few_flat_pixels_beside_the_feet_are_no_floor():
+    """A plate tilted by 25 degrees beside the feet of a subject alone (no floor): its pixels
+    must not pass for a floor: the stature stays within 2.5 %; the control, which accepts a plane
+    of any size and tilt wherever it lies, is thrown off by more than 3 %."""
+    body = load_body("builtin").tracking_lod(1500)
+    subject = load_body("builtin", "height=1.62")
+    pose = body.rest_pose(translation=(0.0, 0.1, 3.2), quaternion=FACING)
+    depth = _scene_depth(subject, pose, None, plate=True)
+    assert person_stature(body, pose, depth, K) == pytest.approx(subject.height, rel=0.025)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(stature, "FLOOR_PIXELS", 10)
+        patch.setattr(stature, "FLOOR_MAX_TILT_RAD", np.pi)
+        patch.setattr(stature, "FLOOR_BELOW_FEET_M", (np.inf, np.inf))
+        assert abs(person_stature(body, pose, depth, K) / subject.height - 1) > 0.03
+
+
+def test_no_stature_without_a_person_in_the_depth():
+    body = load_body("builtin").tracking_lod(1500)
+    pose = body.rest_pose(translation=(0.0, 0.1, 3.2), quaternion=FACING)
+    assert person_stature(body, pose, np.zeros((K.height, K.width), np.float32), K) is None
+    far_away = body.rest_pose(translation=(0.0, 0.1, 300.0), quaternion=FACING)  # a few pixels at most
+    assert person_stature(body, far_away, np.full((K.height, K.width), 3.0, np.float32), K) is None
