@@ -22,7 +22,7 @@ render, measured the same way, so that the percentiles and the posture would can
 for the true pose (within 0.5 %), but the tracker's fits absorb a wrong size (a body too tall
 sinks its feet below the floor the depth cannot see there, bends, leans): the 1.75 m body fitted
 to a 1.75 m subject measured 1.68 m, a 1.55 m subject's wave 1.70 m. The head above the floor is
-the observation's alone (four built-in subjects of 1.55-1.95 m: within 0.3 cm).
+the observation's alone (four built-in subjects of 1.55-1.95 m: within 0.4 cm).
 
 **The person's points** (:func:`person_mask`): the observed pixels inside the model's silhouette
 grown by :data:`GROW_DOWN_UP` of its pixel height up and down and :data:`GROW_SIDEWAYS` sideways
