@@ -148,8 +148,9 @@ def grid_normals(grid: np.ndarray) -> np.ndarray:
     return normals
 
 
-def _refit(points: np.ndarray) -> tuple[np.ndarray, float]:
-    """Least-squares plane (unit normal (3,), offset) through points (N, 3)."""
+def plane_fit(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """Least-squares plane (unit normal (3,), offset: ``normal @ p + offset = 0`` on it) through
+    points (N, 3), by SVD about their mean."""
     centre = points.mean(axis=0)
     normal = np.linalg.svd(points - centre, full_matrices=False)[2][-1]
     return normal, float(-normal @ centre)
@@ -191,7 +192,7 @@ def fit_floor(depth_m: np.ndarray, intrinsics: Intrinsics, **tuning) -> FloorPla
         picked = candidates[near]
         if len(picked) < 3:
             return None
-        normal, offset = _upward(*_refit(points[picked]))
+        normal, offset = _upward(*plane_fit(points[picked]))
         heights = points @ normal + offset
         on_plane = np.abs(heights) <= cfg.distance_threshold_m
         inliers = int(np.count_nonzero(on_plane))
@@ -206,4 +207,4 @@ def fit_floor(depth_m: np.ndarray, intrinsics: Intrinsics, **tuning) -> FloorPla
     return None
 
 
-__all__ = ["FloorPlane", "FloorTuning", "check_depth", "fit_floor", "grid_normals", "sample_grid"]
+__all__ = ["FloorPlane", "FloorTuning", "check_depth", "fit_floor", "grid_normals", "plane_fit", "sample_grid"]

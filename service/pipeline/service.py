@@ -132,8 +132,8 @@ def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score:
     tracking_body = body if len(body.triangles) <= triangles else body.tracking_lod(triangles)
     parts = Parts(config, tracking_body, source, detector, make_pipeline(tracking_body, detector, config, space))
     if out:
-        changes = space is not None or applies(config.body, config.shape, config.tracker)
-        body_of = parts.pipeline.body_of if changes else None  # the shapes --personalize or auto_height lock
+        # the bodies that --personalize or the automatic height change (those the pipeline reports on)
+        body_of = parts.pipeline.body_of if parts.pipeline.personalise_frames else None
         recording = open_recording(Path(out), tracking_body, fps=parts.fps, overlay=config.overlay, body_of=body_of)
         for sink in recording:  # the run closes them; this covers a failure before it starts
             stack.callback(sink.close)

@@ -103,9 +103,9 @@ class HeightFittingTracker(BodyTracker):
     frames it tracks: at once after :data:`FIRST_ESTIMATES` of them, finally after
     :data:`ESTIMATES`, then keeps it (see the module docstring).
 
-    :meth:`height_state` reports ``state`` (``measuring`` or ``locked``), the ``factors``
-    measured so far (each frame's stature over the given body's), the
-    ``factor`` applied now (1 at first) and the body's ``height_m``."""
+    ``factors``: each measured frame's stature over the given body's; ``factor``: the scale
+    applied now (1 at first); ``locked`` after :data:`ESTIMATES`; :meth:`personalisation`
+    reports them as status and info do."""
 
     def __init__(self, body: SkinnedBody, intrinsics: Intrinsics, config: TrackerConfig | None = None,
                  context: ClContext | None = None, body_id: int = 0):
@@ -163,9 +163,3 @@ class HeightFittingTracker(BodyTracker):
         return {"id": self.body_id, "state": "locked" if self.locked else "collecting",
                 "frames": min(len(self.factors), ESTIMATES), "needed": ESTIMATES,
                 "parameters": {"scale": round(self.factor, 4)}, "height_m": round(self.body.height, 4)}
-
-    def height_state(self) -> dict:
-        """The state of the measure (see the class docstring)."""
-        return {"id": self.body_id, "state": "locked" if self.locked else "measuring",
-                "factors": [round(f, 4) for f in self.factors], "factor": round(self.factor, 4),
-                "height_m": round(self.body.height, 4)}

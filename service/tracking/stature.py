@@ -7,12 +7,15 @@ one frame; :func:`upright` and :func:`lifted_upright` say whether a frame may be
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 
 from swarmpose.body.kinematics import quaternion_to_matrix
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
+from swarmpose.detect.floor import grid_normals, plane_fit
 from swarmpose.gpu.reference import raycast_tiles
 from swarmpose.gpu.tile import TileBox
 
@@ -129,15 +132,6 @@ def person_mask(observed: np.ndarray, model: np.ndarray) -> np.ndarray:
         return around & np.isfinite(observed) & (observed > 0) & (np.abs(observed - near) < DEPTH_BAND_M)
 
 
-def _points(depth: np.ndarray, intrinsics: Intrinsics, corner: tuple[int, int] = (0, 0)) -> np.ndarray:
-    """(h, w, 3) m: every pixel of ``depth`` (h, w) m back-projected (OpenCV camera axes), the
-    window's top-left pixel being the image's ``corner`` (column, row)."""
-    rows, cols = np.indices(depth.shape, dtype=np.float64)
-    rows, cols = rows + corner[1], cols + corner[0]
-    z = depth.astype(np.float64)
-    return np.stack([(cols - intrinsics.cx) * z / intrinsics.fx, (rows - intrinsics.cy) * z / intrinsics.fy, z], -1)
-
-
 def _window(verts: np.ndarray, intrinsics: Intrinsics) -> TileBox | None:
     """The image window (whole pixels) that holds the projection of ``verts`` (V, 3) m and the
     growth of :func:`person_mask` around it, plus a pixel for the normals' neighbours; None when
@@ -156,26 +150,18 @@ def _window(verts: np.ndarray, intrinsics: Intrinsics) -> TileBox | None:
 
 
 def facing_along(points: np.ndarray, axis: np.ndarray, max_rad: float = FLAT_MAX_RAD) -> np.ndarray:
-    """(H, W) bool: the pixels of ``points`` (H, W, 3) m whose surface normal (from the central
-    differences of their neighbours) lies within ``max_rad`` of unit ``axis`` (3,), either way:
-    surfaces across the axis, such as the floor under an upright person. A pixel with a neighbour
-    without depth, or whose neighbours' depths differ by more than :data:`EDGE_JUMP_M` or
-    :data:`EDGE_JUMP_SHARE` of its depth, is on an edge and has no normal."""
-    across = np.zeros_like(points)
-    down = np.zeros_like(points)
-    across[:, 1:-1] = points[:, 2:] - points[:, :-2]
-    down[1:-1] = points[2:] - points[:-2]
+    """(H, W) bool: the pixels of ``points`` (H, W, 3) m (NaN: no depth) whose surface normal
+    (:func:`~swarmpose.detect.floor.grid_normals`: central differences, none on the border or next
+    to a missing point) lies within ``max_rad`` of unit ``axis`` (3,), either way: surfaces across
+    the axis, such as the floor under an upright person. A pixel whose neighbours' depths differ by
+    more than :data:`EDGE_JUMP_M` and :data:`EDGE_JUMP_SHARE` of its depth is on an edge and has
+    no normal either."""
     z = points[..., 2]
-    jump = np.maximum(EDGE_JUMP_M, EDGE_JUMP_SHARE * z)  # a neighbour beyond it is another surface
+    jump = np.maximum(EDGE_JUMP_M, EDGE_JUMP_SHARE * z[1:-1, 1:-1])  # a neighbour beyond it is another surface
     smooth = np.zeros(z.shape, bool)
-    smooth[1:-1, 1:-1] = ((z[1:-1, 1:-1] > 0) & (z[1:-1, 2:] > 0) & (z[1:-1, :-2] > 0) & (z[2:, 1:-1] > 0)
-                          & (z[:-2, 1:-1] > 0) & (np.abs(across[1:-1, 1:-1, 2]) < jump[1:-1, 1:-1])
-                          & (np.abs(down[1:-1, 1:-1, 2]) < jump[1:-1, 1:-1]))
-    normal = np.cross(across, down)
-    length = np.linalg.norm(normal, axis=-1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cos = np.abs(normal @ axis) / length
-    return smooth & (np.nan_to_num(cos) > np.cos(max_rad))
+    with np.errstate(invalid="ignore"):
+        smooth[1:-1, 1:-1] = ((np.abs(z[1:-1, 2:] - z[1:-1, :-2]) < jump) & (np.abs(z[2:, 1:-1] - z[:-2, 1:-1]) < jump))
+        return smooth & (np.abs(grid_normals(points) @ axis) > np.cos(max_rad))
 
 
 def ransac_plane_inliers(points: np.ndarray, within: float, hypotheses: int, seed: int = 0) -> np.ndarray:
@@ -214,12 +200,12 @@ def floor_plane(points: np.ndarray, up: np.ndarray, mask: np.ndarray, hit: np.nd
     on = ransac_plane_inliers(points[floor], FLOOR_INLIER_M, FLOOR_RANSAC_ITERATIONS)
     if len(on) < FLOOR_PIXELS:
         return None
-    centre = on.mean(axis=0)
-    normal = np.linalg.svd(on - centre, full_matrices=False)[2][2]
-    normal = normal if normal @ up > 0 else -normal
+    normal, offset = plane_fit(on)
+    if normal @ up <= 0:
+        normal, offset = -normal, -offset
     if _angle(normal, up) > FLOOR_MAX_TILT_RAD:  # a few flat pixels that are no floor (shoes, noise)
         return None
-    return normal, float(centre @ normal)
+    return normal, -offset
 
 
 _MARKS = ("head", "neck", "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_knee", "right_knee",
@@ -282,7 +268,8 @@ def person_stature(body: SkinnedBody, pose: np.ndarray, depth: np.ndarray, intri
     mask = person_mask(depth, model)
     if mask.sum() < MIN_PIXELS:
         return None
-    seen = _points(depth, intrinsics, (u0, v0))
+    seen = replace(intrinsics, width=window.tw, height=window.th, cx=intrinsics.cx - u0,
+                   cy=intrinsics.cy - v0).point_map(depth)  # the window as a camera of its own
     floor = floor_plane(seen, up, mask, hit, facing_along(seen, up))
     axis = up if floor is None else floor[0]
     rows = np.nonzero(mask)[0] + v0

@@ -71,13 +71,13 @@ def test_a_tracker_finds_a_short_subjects_height_and_tracks_better_for_it(tmp_pa
                                    TrackerConfig(particles=32, generations=32, max_people=1))
     for frame in frames:
         tracker.step(frame, detector.detect(frame))
-    state = tracker.height_state()
+    state = tracker.personalisation()
     assert state["state"] == "locked", state
     assert state["height_m"] == pytest.approx(1.55, abs=0.03), state
-    assert len(state["factors"]) == ESTIMATES  # the walk stands upright throughout
-    assert FACTOR_LIMITS[0] <= state["factor"] <= FACTOR_LIMITS[1]
+    assert len(tracker.factors) == ESTIMATES  # the walk stands upright throughout
+    assert FACTOR_LIMITS[0] <= tracker.factor <= FACTOR_LIMITS[1]
     tracker.new_person()  # another person: the given body again
-    assert tracker.height_state()["state"] == "measuring"
+    assert tracker.personalisation()["state"] == "collecting"
     assert tracker.body.height == pytest.approx(1.75, abs=0.01)
     detector.close()
     source.close()
@@ -110,8 +110,8 @@ def test_the_bvh_animates_the_scaled_body(tmp_path):
         given = parts.body
         run_sequence(parts.source, parts.pipeline, parts.sinks, frames=12, progress=False)
         tracker = parts.pipeline.tracker
-    factor = tracker.height_state()["factor"]
-    assert tracker.height_state()["state"] == "locked" and factor < 0.95
+    factor = tracker.factor
+    assert tracker.personalisation()["state"] == "locked" and factor < 0.95
     clip = read_bvh(out / "poses.bvh")
     names, parents = given.bone_names, given.rig.parents
     for b in range(1, len(names)):
