@@ -4,8 +4,10 @@
 # true shape, the other presets and the built-in body scaled to the subject's height (hybrid,
 # simulated detector, p = g = 64), once per PSO seed of SEEDS (default 0 1 2: one run's Δ moves by
 # several mm with the seed, so compare the means). "true-glb" is the true shape exported to a GLB and
-# loaded like the automatic body (a GLB's tracking mesh is decimated from the file: not exactly the
-# spec's). Then the height error over frames used (female-tall: the walk, then the jumping jacks, JACKS).
+# loaded like the automatic body: a check that the GLB path tracks exactly as the spec does (before the
+# GLB carried its exact positions, its tracking mesh was decimated from float32 ones and differed).
+# Then, unless CURVE=0, the height error over frames used (female-tall: the walk, then the jumping
+# jacks, JACKS).
 # One JSON line per run; resumable (a run whose OUT/<name>.json exists is skipped).
 #   usage: scripts/bench-personalise-table4.sh OUT
 set -euo pipefail
@@ -51,5 +53,6 @@ frames_curve() {  # sequence name, clip, prefix of the run names: height error o
         --out "$OUT/${3}frames-$n.glb" --json
   done
 }
+[ "${CURVE:-1}" = 0 ] && exit 0
 frames_curve walk-female-tall "$WALK" ""
 frames_curve jacks-female-tall "$JACKS" "jacks-"

@@ -6,6 +6,14 @@ uint32 indices), one skin whose joints are one node per bone (local TRS =
 has no place for (tracking-joint mapping, named points, metadata) in ``skin.extras``
 under ``"swarmpose"`` (see :mod:`swarmpose.body.gltf_format`). Positions are metres in
 the body frame, which is glTF's frame, so no axis conversion happens.
+
+POSITION is float32, as glTF requires; the body's own float64 positions also travel, as a
+buffer view named by the extras' ``exact_positions`` (no accessor: viewers ignore it), so that
+:func:`~swarmpose.body.gltf_read.load_glb` gives back the same body to the last bit. It matters
+for tracking: the quadric decimation that makes the tracking mesh is not continuous in its
+input, and the float32 rounding alone (at most 3e-8 m) moved a MakeHuman tracking mesh's
+vertices by 0.8 mm on average and 41 mm at most, which moved a walk's error by 0.7 mm and one
+body's three-seed mean by 6 mm (BENCHMARKS.md, personalisation).
 """
 
 from __future__ import annotations
@@ -90,6 +98,11 @@ def save_glb(body: SkinnedBody, path) -> Path:
 
     vertices = np.asarray(body.vertices, dtype=np.float64)
     triangles = np.asarray(body.triangles, dtype=np.int64)
+    blob.extend(b"\0" * (-len(blob) % 8))
+    exact = vertices.astype("<f8").tobytes()
+    gltf.bufferViews.append(gl.BufferView(buffer=0, byteOffset=len(blob), byteLength=len(exact)))
+    blob.extend(exact)
+    extras = {**_extras(body), "exact_positions": len(gltf.bufferViews) - 1}
     attributes = gl.Attributes(
         POSITION=add(vertices.astype(np.float32), gl.FLOAT, gl.VEC3, gl.ARRAY_BUFFER, bounds=True),
         NORMAL=add(vertex_normals(vertices, triangles).astype(np.float32), gl.FLOAT, gl.VEC3, gl.ARRAY_BUFFER),
@@ -109,7 +122,7 @@ def save_glb(body: SkinnedBody, path) -> Path:
         local = binds[b] if parents[b] < 0 else affine_inverse(binds[parents[b]]) @ binds[b]
         gltf.nodes.append(_node_transform(name, local, [1 + int(c) for c in np.flatnonzero(parents == b)]))
     gltf.skins.append(gl.Skin(name=body.name, inverseBindMatrices=ibm, skeleton=1,
-                              joints=list(range(1, 1 + len(body.bone_names))), extras={EXTRAS_KEY: _extras(body)}))
+                              joints=list(range(1, 1 + len(body.bone_names))), extras={EXTRAS_KEY: extras}))
     gltf.scenes.append(gl.Scene(name=body.name, nodes=[0] + [1 + int(r) for r in np.flatnonzero(parents < 0)]))
     buffer = gl.Buffer(byteLength=len(blob))
     gltf.buffers.append(buffer)

@@ -224,7 +224,8 @@ def save(gltf: gl.GLTF2, path: Path) -> Path:
 def test_round_trip_keeps_everything(body, glb):
     back = load_glb(glb)
     assert back.name == body.name
-    np.testing.assert_allclose(back.vertices, body.vertices, atol=1e-6, rtol=0)
+    assert np.abs(body.vertices.astype(np.float32) - body.vertices).max() > 0  # POSITION alone would round
+    np.testing.assert_array_equal(back.vertices, body.vertices)  # the exact positions travel beside it
     np.testing.assert_array_equal(back.triangles, body.triangles)
     np.testing.assert_array_equal(back.skin_indices, body.skin_indices)
     np.testing.assert_allclose(back.skin_weights, body.skin_weights, atol=1e-6, rtol=0)
@@ -242,6 +243,23 @@ def test_round_trip_keeps_everything(body, glb):
 
 def test_round_trip_poses_identically(body, glb):
     assert_same_posing(body, load_glb(glb))
+
+
+def test_positions_edited_by_another_tool_win_over_the_exact_ones(body, glb, tmp_path):
+    """A tool that moves POSITION but keeps the swarmpose extras leaves stale exact positions: the
+    edit must win (the exact ones are used only where they round to POSITION)."""
+    gltf = gl.GLTF2.load(str(glb))
+    acc = gltf.accessors[gltf.meshes[0].primitives[0].attributes.POSITION]
+    view = gltf.bufferViews[acc.bufferView]
+    blob = bytearray(gltf.binary_blob())
+    start = view.byteOffset or 0
+    xyz = np.frombuffer(bytes(blob[start:start + view.byteLength]), "<f4").reshape(-1, 3).copy()
+    xyz[:, 1] += 0.01
+    blob[start:start + view.byteLength] = xyz.tobytes()
+    gltf.set_binary_blob(bytes(blob))
+    back = load_glb(save(gltf, tmp_path / "edited.glb"))
+    np.testing.assert_allclose(back.vertices - body.vertices, np.tile([0, 0.01, 0], (len(body.vertices), 1)),
+                               atol=1e-6, rtol=0)
 
 
 def test_gltf_with_embedded_buffer_round_trips(body, tmp_path):
