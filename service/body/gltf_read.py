@@ -182,16 +182,17 @@ def _extras_of(gltf: gl.GLTF2, skin: gl.Skin) -> dict | None:
     return None
 
 
-def _exact_positions(reader: _Reader, ext: dict | None, stored: np.ndarray) -> np.ndarray:
-    """(V, 3) float64: the positions swarmpose wrote beside POSITION (``exact_positions``, see
-    :mod:`swarmpose.body.gltf_write`) where they round to the float32 ``stored`` ones; else ``stored``.
-    A file edited by another tool keeps its POSITION and loses the match, so its edits win."""
-    view = (ext or {}).get("exact_positions")
+def _exact(reader: _Reader, ext: dict | None, name: str, read: np.ndarray) -> np.ndarray:
+    """The float64 copy of ``read`` (any shape) that swarmpose wrote beside the float32 accessors
+    (the extras' ``exact``, see :mod:`swarmpose.body.gltf_write`), in ``read``'s dtype, where it lies
+    within 1e-6 of what was read; else ``read``. A file edited by another tool keeps its accessors and
+    loses the match, so its edits win."""
+    view = ((ext or {}).get("exact") or {}).get(name)
     if not isinstance(view, int) or not 0 <= view < len(reader.gltf.bufferViews) \
-            or reader.gltf.bufferViews[view].byteLength != stored.size * 8:
-        return stored.astype(np.float64)
-    exact = reader._view(view, 0, np.dtype("<f8"), len(stored), 3)
-    return exact if np.array_equal(exact.astype(np.float32), stored.astype(np.float32)) else stored.astype(np.float64)
+            or reader.gltf.bufferViews[view].byteLength != read.size * 8:
+        return read
+    exact = reader._view(view, 0, np.dtype("<f8"), read.size, 1).reshape(read.shape)
+    return exact.astype(read.dtype) if np.abs(exact - read).max(initial=0.0) <= 1e-6 else read
 
 
 def _restore_extras(ext: dict, n_joints: int, remap: np.ndarray, n_bones: int, path: Path):
@@ -286,9 +287,8 @@ def load_glb(path) -> SkinnedBody:
         to_world = np.eye(4)
     if abs(np.linalg.det(to_world[:3, :3])) < 1e-12:
         raise AssetError(f"{path}: the root joint's transform is degenerate (zero scale); fix the armature")
-    ext = _extras_of(gltf, skin)
-    stored = reader.read(prim.attributes.POSITION, "POSITION")
-    vertices = _exact_positions(reader, ext, stored) @ to_world[:3, :3].T + to_world[:3, 3]
+    vertices = reader.read(prim.attributes.POSITION, "POSITION").astype(np.float64) @ to_world[:3, :3].T \
+        + to_world[:3, 3]
     if prim.indices is None:
         triangles = np.arange(len(vertices) - len(vertices) % 3).reshape(-1, 3)
     else:
@@ -307,6 +307,11 @@ def load_glb(path) -> SkinnedBody:
     vertices, heads = vertices - shift, heads - shift
     binds[:, :3, 3] -= shift
 
+    ext = _extras_of(gltf, skin)
+    vertices = _exact(reader, ext, "positions", vertices)
+    binds = _exact(reader, ext, "bind_matrices", binds)
+    skin_weights = _exact(reader, ext, "skin_weights", skin_weights)
+    heads = binds[:, :3, 3].copy()
     if ext is not None:
         bone_joint, bone_fraction, point_names, point_bones, point_rest, metadata = _restore_extras(
             ext, len(joints), remap, len(names), path)

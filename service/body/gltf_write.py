@@ -7,13 +7,13 @@ has no place for (tracking-joint mapping, named points, metadata) in ``skin.extr
 under ``"swarmpose"`` (see :mod:`swarmpose.body.gltf_format`). Positions are metres in
 the body frame, which is glTF's frame, so no axis conversion happens.
 
-POSITION is float32, as glTF requires; the body's own float64 positions also travel, as a
-buffer view named by the extras' ``exact_positions`` (no accessor: viewers ignore it), so that
-:func:`~swarmpose.body.gltf_read.load_glb` gives back the same body to the last bit. It matters
-for tracking: the quadric decimation that makes the tracking mesh is not continuous in its
-input, and the float32 rounding alone (at most 3e-8 m) moved a MakeHuman tracking mesh's
-vertices by 0.8 mm on average and 41 mm at most, which moved a walk's error by 0.7 mm and one
-body's three-seed mean by 6 mm (BENCHMARKS.md, personalisation).
+Accessors are float32, as glTF requires; the body's own positions, bind matrices and skin weights
+also travel as float64 buffer views named by the extras' ``exact`` (no accessors: viewers ignore
+them), so that :func:`~swarmpose.body.gltf_read.load_glb` gives back the same body to the last
+bit, and a body and its export track identically. Two reasons: the quadric decimation that makes
+the tracking mesh is not continuous in its input (the float32 rounding alone, at most 3e-8 m,
+moved a MakeHuman tracking mesh's vertices by 0.8 mm on average and 41 mm at most), and the
+tracker's search is chaotic (bind matrices 2e-8 m apart moved a 50-frame walk's Δ by 1.2 mm).
 """
 
 from __future__ import annotations
@@ -98,11 +98,16 @@ def save_glb(body: SkinnedBody, path) -> Path:
 
     vertices = np.asarray(body.vertices, dtype=np.float64)
     triangles = np.asarray(body.triangles, dtype=np.int64)
-    blob.extend(b"\0" * (-len(blob) % 8))
-    exact = vertices.astype("<f8").tobytes()
-    gltf.bufferViews.append(gl.BufferView(buffer=0, byteOffset=len(blob), byteLength=len(exact)))
-    blob.extend(exact)
-    extras = {**_extras(body), "exact_positions": len(gltf.bufferViews) - 1}
+    def add_exact(array) -> int:
+        blob.extend(b"\0" * (-len(blob) % 8))
+        data = np.ascontiguousarray(array, dtype="<f8").tobytes()
+        gltf.bufferViews.append(gl.BufferView(buffer=0, byteOffset=len(blob), byteLength=len(data)))
+        blob.extend(data)
+        return len(gltf.bufferViews) - 1
+
+    exact = {"positions": add_exact(vertices), "bind_matrices": add_exact(body.bind_matrices),
+             "skin_weights": add_exact(body.skin_weights)}
+    extras = {**_extras(body), "exact": exact}
     attributes = gl.Attributes(
         POSITION=add(vertices.astype(np.float32), gl.FLOAT, gl.VEC3, gl.ARRAY_BUFFER, bounds=True),
         NORMAL=add(vertex_normals(vertices, triangles).astype(np.float32), gl.FLOAT, gl.VEC3, gl.ARRAY_BUFFER),

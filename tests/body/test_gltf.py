@@ -225,14 +225,15 @@ def test_round_trip_keeps_everything(body, glb):
     back = load_glb(glb)
     assert back.name == body.name
     assert np.abs(body.vertices.astype(np.float32) - body.vertices).max() > 0  # POSITION alone would round
-    np.testing.assert_array_equal(back.vertices, body.vertices)  # the exact positions travel beside it
+    # bit for bit: the exact positions, bind matrices and weights travel beside the float32 accessors
+    np.testing.assert_array_equal(back.vertices, body.vertices)
     np.testing.assert_array_equal(back.triangles, body.triangles)
     np.testing.assert_array_equal(back.skin_indices, body.skin_indices)
-    np.testing.assert_allclose(back.skin_weights, body.skin_weights, atol=1e-6, rtol=0)
+    np.testing.assert_array_equal(back.skin_weights, body.skin_weights)
     assert back.bone_names == body.bone_names
     np.testing.assert_array_equal(back.bone_parents, body.bone_parents)
-    np.testing.assert_allclose(back.bone_heads, body.bone_heads, atol=1e-6, rtol=0)
-    np.testing.assert_allclose(back.bind_matrices, body.bind_matrices, atol=1e-6, rtol=0)
+    np.testing.assert_array_equal(back.bone_heads, body.bone_heads)
+    np.testing.assert_array_equal(back.bind_matrices, body.bind_matrices)
     np.testing.assert_array_equal(back.bone_joint, body.bone_joint)
     np.testing.assert_array_equal(back.bone_fraction, body.bone_fraction)
     assert back.point_names == body.point_names
