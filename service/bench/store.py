@@ -8,11 +8,12 @@ import json
 import os
 from pathlib import Path
 
-TRACKER_DEFAULTS = {"particles": 64, "generations": 64, "max_people": 1, "arm_prior": 0.0, "limb_flips": True}
+TRACKER_DEFAULTS = {"particles": 64, "generations": 64, "max_people": 1, "arm_prior": 0.0, "limb_flips": True,
+                    "hidden_lifts": True}
 """The tracker settings every record stores, so that a resume compares them even when the
 caller left them at their defaults (``bench utdmhad`` adds ``auto_height``, which the matrix's
 given shapes never use)."""
-BEFORE_THE_SETTING = {**TRACKER_DEFAULTS, "limb_flips": False, "auto_height": False}
+BEFORE_THE_SETTING = {**TRACKER_DEFAULTS, "limb_flips": False, "hidden_lifts": False, "auto_height": False}
 """What a record that lacks a setting was made with: the tracker's behaviour before the setting
 existed (its default then, or, for a new behaviour that is on by default now, off)."""
 

@@ -3,7 +3,9 @@ objective (§2.3–2.4).
 
 Per frame (:meth:`BodyTracker.step`):
 
-1. The detection's joints (score >= ``min_score``) are lifted to J^e on the depth.
+1. The detection's joints (score >= ``min_score``) are lifted to J^e on the depth. With a
+   previous solution, the lifts of limb joints it hides behind its own body, where the depth
+   shows that occluder, leave the 3D term (:mod:`swarmpose.tracking.hidden_lifts`, ``hidden_lifts``).
 2. **Start**. With a previous solution (state *tracking*), particles start around it in a
    region that contains J^e (:mod:`swarmpose.tracking.search`); the last 5 solutions and
    the J^e torso pose are injected as particles, and so are the previous solution's limbs
@@ -42,6 +44,7 @@ from swarmpose.gpu.tile import box_around
 from swarmpose.sources.base import Frame
 from swarmpose.tracking import search, verdict
 from swarmpose.tracking.config import MODE_WEIGHTS, TrackerConfig
+from swarmpose.tracking.hidden_lifts import without_hidden_lifts
 from swarmpose.tracking.init_pose import FACINGS_DEG, torso_pose, turned
 from swarmpose.tracking.lift import lift_eval_joints
 from swarmpose.tracking.limb_flips import limb_flips
@@ -222,6 +225,10 @@ class BodyTracker:
             start = search.spread(centre, pso.particles, rng, np.full(3, 0.04), 0.1, 0.15)
         else:
             centre = self.previous
+            if self.config.hidden_lifts:
+                t_hidden = time.perf_counter()
+                targets, _ = without_hidden_lifts(self.body, centre, targets, self.intrinsics)
+                timings["hidden"] = 1000 * (time.perf_counter() - t_hidden)
             recheck = self._recheck(frame.index, lifted, targets, depth, rng, timings)
             torso = torso_pose(self.body, lifted, centre[7:], upright=False)
             offset = np.abs(torso[:3] - centre[:3]) if torso is not None else np.zeros(3)

@@ -58,6 +58,9 @@ class TrackerConfig:
                                minimum=0.0)
     limb_flips: bool = setting(True, "every frame, each limb of the last solution mirrored along the line of sight "
                                      "(same image, other depth) joins the swarm as a particle")
+    hidden_lifts: bool = setting(True, "a limb joint the last solution hides behind its own body, where the depth "
+                                       "shows that occluder, leaves the 3D joint term (its lift measured the "
+                                       "occluder); the 2D term keeps it")
     auto_height: bool = setting(True, "a body whose shape is not given (no --shape, not a .glb) is scaled to each "
                                       "person's height, measured on the depth of their first upright frames")
     smoothing: str = setting("off", "smooth the published poses: off (as in evaluation) or one-euro (a One-Euro "

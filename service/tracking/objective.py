@@ -17,7 +17,11 @@ sweep in BENCHMARKS.md):
   The lift of an occluded joint is the occluder's surface (the far arm of a person seen from
   the side lifts onto the torso, 20-30 cm in front of the arm); a one-sided 3D distance
   (free behind the lift) for every joint, or for the joints the previous solution hides,
-  was measured and not kept: it made front views worse (BENCHMARKS.md, issue 12).
+  was measured and not kept: it made front views worse (BENCHMARKS.md, issue 12). What is
+  kept (``hidden_lifts``, :mod:`swarmpose.tracking.hidden_lifts`): a limb joint's lift leaves
+  the 3D term when the previous solution hides the joint *and* the depth at its keypoint shows
+  that solution's occluder, so a track that wrongly holds a visible arm behind the torso keeps
+  the lift that pulls it out.
 * ``E_J = α·E_J2D + (1 − α)·E_J3D``, α = 0.97.
 * ``E_P`` in **centimetres** (:meth:`Objective.penetration_cm`): how deep the elbows and
   wrists sink into the torso's core, a capsule from the hips' middle to the shoulders'

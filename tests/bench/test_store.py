@@ -16,15 +16,18 @@ def test_a_record_is_read_back_only_with_its_own_settings(tmp_path):
 
 
 def test_a_record_made_before_a_setting_existed_reads_as_what_the_tracker_did_then(tmp_path):
-    """Records written before arm_prior and limb_flips existed lack them: they were made with the
-    prior off (0, still its default) and without flips (on by default now), so they resume a run
-    with flips off, and neither the default run nor one with the prior on."""
+    """Records written before arm_prior, limb_flips and hidden_lifts existed lack them: they were
+    made with the prior off (0, still its default), without flips and with every lift in the 3D
+    term (both on by default now), so they resume a run with those off, and neither the default run
+    nor one with the prior on."""
     path = tmp_path / "old.json"
     write_record(path, {"mpjpe_mm": 50.0, "particles": 64, "generations": 64, "max_people": 1})
-    assert read_record(path, tracker_settings({"limb_flips": False}))["mpjpe_mm"] == 50.0
+    then = {"limb_flips": False, "hidden_lifts": False}
+    assert read_record(path, tracker_settings(then))["mpjpe_mm"] == 50.0
     assert read_record(path, tracker_settings(None)) is None, "the default run has flips"
-    assert read_record(path, tracker_settings({"arm_prior": 1.0, "limb_flips": False})) is None
-    assert read_record(path, tracker_settings({"particles": 32, "limb_flips": False})) is None
+    assert read_record(path, tracker_settings({"limb_flips": False})) is None, "and drops hidden lifts"
+    assert read_record(path, tracker_settings({"arm_prior": 1.0, **then})) is None
+    assert read_record(path, tracker_settings({"particles": 32, **then})) is None
 
 
 def test_a_record_made_without_flips_does_not_resume_a_default_run(tmp_path):
