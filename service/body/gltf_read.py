@@ -184,9 +184,10 @@ def _extras_of(gltf: gl.GLTF2, skin: gl.Skin) -> dict | None:
 
 def _exact(reader: _Reader, ext: dict | None, name: str, read: np.ndarray) -> np.ndarray:
     """The float64 copy of ``read`` (any shape) that swarmpose wrote beside the float32 accessors
-    (the extras' ``exact``, see :mod:`swarmpose.body.gltf_write`), in ``read``'s dtype, where it lies
-    within 1e-6 of what was read; else ``read``. A file edited by another tool keeps its accessors and
-    loses the match, so its edits win."""
+    (the extras' ``exact``, see :mod:`swarmpose.body.gltf_write`), in ``read``'s dtype, when all of it
+    lies within 1e-6 of what was read; else ``read`` (all or nothing). A file edited by another tool
+    keeps its accessors and loses the match, so its edits win; a file written before the exact copies
+    existed has none and gives ``read``."""
     view = ((ext or {}).get("exact") or {}).get(name)
     if not isinstance(view, int) or not 0 <= view < len(reader.gltf.bufferViews) \
             or reader.gltf.bufferViews[view].byteLength != read.size * 8:

@@ -78,7 +78,8 @@ def save_glb(body: SkinnedBody, path) -> Path:
     """Write ``body`` as a skinned glTF 2.0 file and return its path.
 
     ``.gltf`` writes JSON with the buffer embedded as a data URI; any other suffix writes
-    binary GLB. Positions are float32 metres in the body frame (= glTF frame).
+    binary GLB. The accessors' positions are float32 metres in the body frame (= glTF frame); the
+    float64 positions, bind matrices and skin weights travel beside them (the module docstring).
     """
     path = Path(path)
     blob = bytearray()
@@ -96,15 +97,16 @@ def save_glb(body: SkinnedBody, path) -> Path:
         gltf.accessors.append(acc)
         return len(gltf.accessors) - 1
 
-    vertices = np.asarray(body.vertices, dtype=np.float64)
-    triangles = np.asarray(body.triangles, dtype=np.int64)
-    def add_exact(array) -> int:
+    def add_exact(array: np.ndarray) -> int:
+        """A buffer view (no accessor) of ``array`` as little-endian float64; its index."""
         blob.extend(b"\0" * (-len(blob) % 8))
         data = np.ascontiguousarray(array, dtype="<f8").tobytes()
         gltf.bufferViews.append(gl.BufferView(buffer=0, byteOffset=len(blob), byteLength=len(data)))
         blob.extend(data)
         return len(gltf.bufferViews) - 1
 
+    vertices = np.asarray(body.vertices, dtype=np.float64)
+    triangles = np.asarray(body.triangles, dtype=np.int64)
     exact = {"positions": add_exact(vertices), "bind_matrices": add_exact(body.bind_matrices),
              "skin_weights": add_exact(body.skin_weights)}
     extras = {**_extras(body), "exact": exact}

@@ -225,7 +225,7 @@ class BodyTracker:
             start = search.spread(centre, pso.particles, rng, np.full(3, 0.04), 0.1, 0.15)
         else:
             centre = self.previous
-            if self.config.hidden_lifts:
+            if self.config.hidden_lifts and self.config.mode != "depth":  # depth mode: no joint term
                 t_hidden = time.perf_counter()
                 targets, _ = without_hidden_lifts(self.body, centre, targets, self.intrinsics)
                 timings["hidden"] = 1000 * (time.perf_counter() - t_hidden)

@@ -10,8 +10,8 @@ solution alone decided which joints were hidden, and a track that wrongly held a
 torso kept it there. Here a lift leaves the 3D term only when two tests agree:
 
 1. **the previous solution hides the joint**: along the camera ray through the joint, the body's
-   own surface lies more than :data:`HIDDEN_M` in front of it (a visible joint lies its radius,
-   2.5-7 cm, behind its surface);
+   own surface lies more than :data:`HIDDEN_M` in front of it (a visible limb joint lies its
+   radius, 2.5-4.5 cm, behind its surface);
 2. **the observation agrees with that occluder**: the observed surface at the keypoint lies within
    :data:`EXPLAINED_M` of the previous solution's surface on the keypoint's ray. An arm the track
    wrongly holds behind the torso shows in the depth in front of the model's torso, fails this

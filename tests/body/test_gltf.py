@@ -248,7 +248,7 @@ def test_round_trip_poses_identically(body, glb):
 
 def test_positions_edited_by_another_tool_win_over_the_exact_ones(body, glb, tmp_path):
     """A tool that moves POSITION but keeps the swarmpose extras leaves stale exact positions: the
-    edit must win (the exact ones are used only where they round to POSITION)."""
+    edit must win (the exact copy is used only when all of it lies within 1e-6 of POSITION)."""
     gltf = gl.GLTF2.load(str(glb))
     acc = gltf.accessors[gltf.meshes[0].primitives[0].attributes.POSITION]
     view = gltf.bufferViews[acc.bufferView]
@@ -263,11 +263,22 @@ def test_positions_edited_by_another_tool_win_over_the_exact_ones(body, glb, tmp
                                atol=1e-6, rtol=0)
 
 
+def test_a_file_written_before_the_exact_copies_reads_its_float32_accessors(body, glb, tmp_path):
+    """Files of earlier versions have no ``exact`` extras: the body comes from the accessors, within
+    float32 precision of the original."""
+    gltf = gl.GLTF2.load(str(glb))
+    del gltf.skins[0].extras["swarmpose"]["exact"]
+    back = load_glb(save(gltf, tmp_path / "older.glb"))
+    np.testing.assert_array_equal(back.vertices, body.vertices.astype(np.float32).astype(np.float64))
+    assert 0 < np.abs(back.bind_matrices - body.bind_matrices).max() < 1e-6
+
+
 def test_gltf_with_embedded_buffer_round_trips(body, tmp_path):
     path = save_glb(body, tmp_path / "body.gltf")
     assert json.loads(path.read_text())["buffers"][0]["uri"].startswith("data:application/octet-stream;base64,")
     back = load_glb(path)
-    np.testing.assert_allclose(back.vertices, body.vertices, atol=1e-6, rtol=0)
+    np.testing.assert_array_equal(back.vertices, body.vertices)
+    np.testing.assert_array_equal(back.bind_matrices, body.bind_matrices)
     assert back.metadata == body.metadata
     assert_same_posing(body, back)
 
