@@ -85,12 +85,16 @@ def save_glb(body: SkinnedBody, path) -> Path:
     blob = bytearray()
     gltf = gl.GLTF2(asset=gl.Asset(generator="swarmpose", version="2.0"), scene=0)
 
-    def add(array: np.ndarray, component: int, kind: str, target: int | None = None, bounds: bool = False) -> int:
-        data = np.ascontiguousarray(array, dtype=COMPONENT_DTYPES[component]).tobytes()
+    def add_view(data: bytes, align: int, target: int | None = None) -> int:
+        """A buffer view of ``data`` starting ``align``-aligned in the buffer; its index."""
+        blob.extend(b"\0" * (-len(blob) % align))
         gltf.bufferViews.append(gl.BufferView(buffer=0, byteOffset=len(blob), byteLength=len(data), target=target))
         blob.extend(data)
-        blob.extend(b"\0" * (-len(blob) % 4))
-        acc = gl.Accessor(bufferView=len(gltf.bufferViews) - 1, componentType=component, count=len(array), type=kind)
+        return len(gltf.bufferViews) - 1
+
+    def add(array: np.ndarray, component: int, kind: str, target: int | None = None, bounds: bool = False) -> int:
+        data = np.ascontiguousarray(array, dtype=COMPONENT_DTYPES[component]).tobytes()
+        acc = gl.Accessor(bufferView=add_view(data, 4, target), componentType=component, count=len(array), type=kind)
         if bounds:
             acc.min = [float(c) for c in array.min(axis=0)]
             acc.max = [float(c) for c in array.max(axis=0)]
@@ -99,11 +103,7 @@ def save_glb(body: SkinnedBody, path) -> Path:
 
     def add_exact(array: np.ndarray) -> int:
         """A buffer view (no accessor) of ``array`` as little-endian float64; its index."""
-        blob.extend(b"\0" * (-len(blob) % 8))
-        data = np.ascontiguousarray(array, dtype="<f8").tobytes()
-        gltf.bufferViews.append(gl.BufferView(buffer=0, byteOffset=len(blob), byteLength=len(data)))
-        blob.extend(data)
-        return len(gltf.bufferViews) - 1
+        return add_view(np.ascontiguousarray(array, dtype="<f8").tobytes(), 8)
 
     vertices = np.asarray(body.vertices, dtype=np.float64)
     triangles = np.asarray(body.triangles, dtype=np.int64)
@@ -131,6 +131,7 @@ def save_glb(body: SkinnedBody, path) -> Path:
     gltf.skins.append(gl.Skin(name=body.name, inverseBindMatrices=ibm, skeleton=1,
                               joints=list(range(1, 1 + len(body.bone_names))), extras={EXTRAS_KEY: extras}))
     gltf.scenes.append(gl.Scene(name=body.name, nodes=[0] + [1 + int(r) for r in np.flatnonzero(parents < 0)]))
+    blob.extend(b"\0" * (-len(blob) % 4))  # the binary chunk's length: a multiple of 4
     buffer = gl.Buffer(byteLength=len(blob))
     gltf.buffers.append(buffer)
     try:

@@ -156,6 +156,26 @@ def plane_fit(points: np.ndarray) -> tuple[np.ndarray, float]:
     return normal, float(-normal @ centre)
 
 
+def ransac_plane_inliers(points: np.ndarray, within: float, hypotheses: int, seed: int = 0) -> np.ndarray:
+    """The points (M, 3) of ``points`` (N, 3) m within ``within`` (m) of the plane through three of
+    them that has the most such points, out of ``hypotheses`` random triples drawn by a generator
+    of its own seeded with ``seed``. Not Open3D's ``segment_plane``, which :func:`fit_floor` uses: that
+    draws from one process-wide generator, so a caller in another thread than the detection thread's
+    floor fit (the automatic height's measure, :mod:`swarmpose.tracking.stature`) would make neither
+    repeat."""
+    if len(points) < 3:
+        return points[:0]
+    triples = points[np.random.default_rng(seed).integers(0, len(points), (hypotheses, 3))]
+    normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
+    length = np.linalg.norm(normals, axis=1)
+    good = length > 1e-12
+    if not np.any(good):
+        return points[:0]
+    normals, anchors = normals[good] / length[good, None], triples[good, 0]
+    near = np.abs((points[None] - anchors[:, None]) @ normals[..., None])[..., 0] < within  # (K, N)
+    return points[near[int(np.argmax(near.sum(axis=1)))]]
+
+
 def _upward(normal: np.ndarray, offset: float) -> tuple[np.ndarray, float]:
     """The same plane with its normal turned towards the camera's up side."""
     return (normal, offset) if normal @ UP_IN_CAMERA >= 0 else (-normal, -offset)

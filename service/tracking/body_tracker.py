@@ -227,7 +227,7 @@ class BodyTracker:
             centre = self.previous
             if self.config.hidden_lifts and self.config.mode != "depth":  # depth mode: no joint term
                 t_hidden = time.perf_counter()
-                targets, _ = without_hidden_lifts(self.body, centre, targets, self.intrinsics)
+                targets = without_hidden_lifts(self.body, centre, targets, self.intrinsics)
                 timings["hidden"] = 1000 * (time.perf_counter() - t_hidden)
             recheck = self._recheck(frame.index, lifted, targets, depth, rng, timings)
             torso = torso_pose(self.body, lifted, centre[7:], upright=False)

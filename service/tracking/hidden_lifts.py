@@ -74,11 +74,11 @@ def hidden_lifts(body: SkinnedBody, pose: np.ndarray, targets: JointTargets, int
 
 
 def without_hidden_lifts(body: SkinnedBody, pose: np.ndarray, targets: JointTargets,
-                         intrinsics: Intrinsics) -> tuple[JointTargets, np.ndarray]:
-    """``targets`` with the lifts :func:`hidden_lifts` finds set to NaN (out of the 3D term), and that mask."""
+                         intrinsics: Intrinsics) -> JointTargets:
+    """``targets`` with the lifts :func:`hidden_lifts` finds set to NaN (out of the 3D term)."""
     hidden = hidden_lifts(body, pose, targets, intrinsics)
     if not hidden.any():
-        return targets, hidden
+        return targets
     xyz = targets.xyz.copy()
     xyz[hidden] = np.nan
-    return replace(targets, xyz=xyz), hidden
+    return replace(targets, xyz=xyz)

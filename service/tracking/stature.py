@@ -15,7 +15,7 @@ import numpy as np
 from swarmpose.body.kinematics import quaternion_to_matrix
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
-from swarmpose.detect.floor import grid_normals, plane_fit
+from swarmpose.detect.floor import grid_normals, plane_fit, ransac_plane_inliers
 from swarmpose.gpu.reference import raycast_tiles
 from swarmpose.gpu.tile import TileBox
 
@@ -164,25 +164,6 @@ def facing_along(points: np.ndarray, axis: np.ndarray, max_rad: float = FLAT_MAX
         return smooth & (np.abs(grid_normals(points) @ axis) > np.cos(max_rad))
 
 
-def ransac_plane_inliers(points: np.ndarray, within: float, hypotheses: int, seed: int = 0) -> np.ndarray:
-    """The points (M, 3) of ``points`` (N, 3) m within ``within`` (m) of the plane through three of
-    them that has the most such points, out of ``hypotheses`` random triples drawn by a generator
-    of its own seeded with ``seed``. Not Open3D's ``segment_plane``: that draws from one
-    process-wide generator, which the floor fit of the detection thread (:mod:`swarmpose.detect.floor`)
-    seeds and draws from at the same time, so neither would repeat."""
-    if len(points) < 3:
-        return points[:0]
-    triples = points[np.random.default_rng(seed).integers(0, len(points), (hypotheses, 3))]
-    normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
-    length = np.linalg.norm(normals, axis=1)
-    good = length > 1e-12
-    if not np.any(good):
-        return points[:0]
-    normals, anchors = normals[good] / length[good, None], triples[good, 0]
-    near = np.abs((points[None] - anchors[:, None]) @ normals[..., None])[..., 0] < within  # (K, N)
-    return points[near[int(np.argmax(near.sum(axis=1)))]]
-
-
 def floor_plane(points: np.ndarray, up: np.ndarray, mask: np.ndarray, hit: np.ndarray,
                 flat: np.ndarray) -> tuple[np.ndarray, float] | None:
     """The floor under the person, None when none is seen: (unit normal (3,) on the side of ``up``,
@@ -285,12 +266,13 @@ def person_stature(body: SkinnedBody, pose: np.ndarray, depth: np.ndarray, intri
         return None
     if rows[head].min() == 0 or rows[feet].max() == intrinsics.height - 1:
         return None
-    top = float(np.percentile(along[head], PERCENTILES[1]))
-    soles = float(np.percentile(along[feet], PERCENTILES[0]))
+
+    def ends(along: np.ndarray) -> tuple[float, float]:  # the head's top and the soles along an axis, m
+        return float(np.percentile(along[head], PERCENTILES[1])), float(np.percentile(along[feet], PERCENTILES[0]))
+
+    top, soles = ends(along)
     if floor is not None and -FLOOR_BELOW_FEET_M[0] <= soles - floor[1] <= FLOOR_BELOW_FEET_M[1]:
         return (top - floor[1]) / UPRIGHT_SHARE
     if floor is not None:  # a plane, but not the one the feet stand on (a step, a table): along the torso
-        along = person @ up
-        top, soles = float(np.percentile(along[head], PERCENTILES[1])), float(np.percentile(along[feet],
-                                                                                           PERCENTILES[0]))
+        top, soles = ends(person @ up)
     return (top - soles) / (UPRIGHT_SHARE - HIDDEN_SOLE_SHARE)
