@@ -13,9 +13,11 @@ TRACKER_DEFAULTS = {"particles": 64, "generations": 64, "max_people": 1, "arm_pr
 """The tracker settings every record stores, so that a resume compares them even when the
 caller left them at their defaults (``bench utdmhad`` adds ``auto_height``, which the matrix's
 given shapes never use)."""
-BEFORE_THE_SETTING = {**TRACKER_DEFAULTS, "limb_flips": False, "hidden_lifts": False, "auto_height": False}
+BEFORE_THE_SETTING = {**TRACKER_DEFAULTS, "limb_flips": False, "hidden_lifts": False, "auto_height": False,
+                      "lag_frames": 0.0}
 """What a record that lacks a setting was made with: the tracker's behaviour before the setting
-existed (its default then, or, for a new behaviour that is on by default now, off)."""
+existed (its default then, or, for a new behaviour that is on by default now, off); UTD-MHAD
+records without ``lag_frames`` were scored against the files' own pairing of skeleton and depth."""
 
 
 def tracker_settings(tracker: dict | None) -> dict:

@@ -24,8 +24,14 @@ begin seated).
 
 Each (sequence, variant) is one JSON record in ``OUT/results/`` with the per-frame
 estimates in a ``.npz`` beside it, both written whole or not at all: an interrupted run
-resumes. A record is reused when its frames, particles and generations match; after a
+resumes. A record is reused when its frames, tracker settings and skeleton lag match (a
+record without ``lag_frames`` was scored against the files' own pairing, lag 0); after a
 change to the tracker, use a fresh ``--out``.
+
+The skeleton is compared in time with the depth: ``lag_frames`` (default
+:data:`~swarmpose.sources.utdmhad_sync.DEPTH_LAG_FRAMES`, measured on the data by
+:mod:`swarmpose.sources.utdmhad_sync`; ``--lag 0`` the files' pairing) for the ground truth and
+the simulated detector's keypoints alike.
 """
 
 from __future__ import annotations
@@ -48,6 +54,7 @@ from swarmpose.core.progress import progress_bar
 from swarmpose.pipeline.config import ServiceConfig
 from swarmpose.sim.evaluate import joint_errors, summarise
 from swarmpose.sources.utdmhad import UtdMhadSource, measured_height
+from swarmpose.sources.utdmhad_sync import DEPTH_LAG_FRAMES
 from swarmpose.tracking.config import TrackerConfig
 
 FOLDER = "rgbd/utd_mhad/depth"
@@ -97,8 +104,9 @@ def subject_height(folder: Path, subject: str) -> float:
 
 
 def track_sequence(path: Path, mode: str, detector: str, shape: str, assets: Path, tracker: dict,
-                   frames: int) -> tuple[dict, np.ndarray, np.ndarray]:
-    """(record, estimates (F, J, 3), truth (F, J, 3)) of one sequence in one variant."""
+                   frames: int, lag_frames: float = DEPTH_LAG_FRAMES) -> tuple[dict, np.ndarray, np.ndarray]:
+    """(record, estimates (F, J, 3), truth (F, J, 3)) of one sequence in one variant, the
+    skeleton taken ``lag_frames`` behind the depth (the source's ``?lag=``)."""
     spec = DETECTORS[detector].format(assets=assets)
     match = _NAME.match(path.name)
     shape_spec = ""
@@ -106,12 +114,12 @@ def track_sequence(path: Path, mode: str, detector: str, shape: str, assets: Pat
     if shape == "measured":
         height = subject_height(path.parent, match.group(2))
         shape_spec = f"height={height:.3f}"
-    config = ServiceConfig(source=f"utdmhad:{path}", detector=spec, shape=shape_spec,
+    config = ServiceConfig(source=f"utdmhad:{path}?lag={lag_frames:g}", detector=spec, shape=shape_spec,
                            tracker=TrackerConfig(mode=mode, **tracker), overlay=False)
     run = track_with_truth(config, frames)
     record = {"sequence": path.name.removesuffix("_depth.mat"), "action": int(match.group(1)),
               "subject": match.group(2), "mode": mode, "detector": detector, "shape": shape, "height_m": height,
-              "requested_frames": frames, **scores(run), **tracker}
+              "requested_frames": frames, "lag_frames": lag_frames, **scores(run), **tracker}
     return record, run.estimates, run.truth
 
 
@@ -126,10 +134,10 @@ def variant_settings(tracker: dict, mode: str, shape: str) -> dict:
 def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[str, ...] = ("simulated",),
                 shapes: tuple[str, ...] = ("default",), frames: int = 0, tracker: dict | None = None,
                 subjects: tuple[str, ...] = SUBJECTS, actions: tuple[int, ...] = (),
-                assets: str | Path | None = None,
+                assets: str | Path | None = None, lag_frames: float = DEPTH_LAG_FRAMES,
                 progress: bool = True) -> list[dict]:
     """Every (sequence, variant) record, computed or read back from ``out/results``, with
-    ``mpjpe_offset_mm`` filled in (see the module doc)."""
+    ``mpjpe_offset_mm`` filled in (see the module doc); the skeleton ``lag_frames`` behind the depth."""
     for name, given, allowed in (("mode", modes, MODES), ("detector", detectors, tuple(DETECTORS)),
                                  ("shape", shapes, SHAPES)):
         bad = [g for g in given if g not in allowed]
@@ -137,6 +145,8 @@ def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[s
             raise ConfigError(f"unknown {name} {bad[0]!r}; choose from {', '.join(allowed)}")
     if frames < 0:
         raise ConfigError(f"--frames must be 0 (all) or more, got {frames}")
+    if not (np.isfinite(lag_frames) and 0.0 <= lag_frames <= 10.0):
+        raise ConfigError(f"--lag must be a number of frames within 0..10, got {lag_frames}")
     root = find_assets(assets).resolve()
     tracker = tracker_settings(tracker)
     results = Path(out) / "results"
@@ -148,9 +158,10 @@ def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[s
         for path, mode, detector, shape in todo:
             stem = f"{path.name.removesuffix('_depth.mat')}-{variant_name(mode, detector, shape)}"
             settings = variant_settings(tracker, mode, shape)
-            stored = _read(results / stem, frames, settings)
+            stored = _read(results / stem, frames, settings, lag_frames)
             if stored is None:
-                record, estimates, truth = track_sequence(path, mode, detector, shape, root, settings, frames)
+                record, estimates, truth = track_sequence(path, mode, detector, shape, root, settings, frames,
+                                                          lag_frames)
                 tmp = results / f"{stem}.tmp.npz"
                 np.savez(tmp, estimates=estimates, truth=truth)
                 os.replace(tmp, results / f"{stem}.npz")
@@ -163,10 +174,10 @@ def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[s
     return records
 
 
-def _read(stem: Path, frames: int, tracker: dict) -> tuple[dict, np.ndarray, np.ndarray] | None:
-    """(record, estimates, truth) stored under ``stem`` (.json, .npz) for these frames and
-    tracker settings; None when absent, made otherwise, or unreadable."""
-    record = read_record(stem.with_suffix(".json"), {"requested_frames": frames, **tracker})
+def _read(stem: Path, frames: int, tracker: dict, lag_frames: float) -> tuple[dict, np.ndarray, np.ndarray] | None:
+    """(record, estimates, truth) stored under ``stem`` (.json, .npz) for these frames, tracker
+    settings and skeleton lag; None when absent, made otherwise, or unreadable."""
+    record = read_record(stem.with_suffix(".json"), {"requested_frames": frames, "lag_frames": lag_frames, **tracker})
     if record is None:
         return None
     try:

@@ -20,6 +20,7 @@ from swarmpose.cli.common import DEFAULTS, add_body_options, non_negative_float,
 from swarmpose.cli.settings import add_flags, from_args
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import parse_size
+from swarmpose.sources.utdmhad_sync import DEPTH_LAG_FRAMES
 from swarmpose.tracking.config import TrackerConfig
 
 
@@ -91,7 +92,7 @@ def cmd_bench_utdmhad(args: argparse.Namespace) -> int:
     records = run_utdmhad(Path(args.out), modes=args.modes, detectors=args.detectors, shapes=args.shapes,
                           frames=args.frames, tracker=tracker, subjects=args.subjects,
                           actions=tuple(int(a) for a in args.actions), assets=args.assets,
-                          progress=not quiet(args))
+                          lag_frames=args.lag, progress=not quiet(args))
     out = Path(args.out)
     overall = utdmhad_summary(records)
     table = format_utdmhad_table(records)
@@ -212,6 +213,8 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
     p.add_argument("--actions", type=_names(tuple(str(a) for a in ACTIONS)), default=(),
                    help="comma-separated action numbers 1..27 (default: all)")
     p.add_argument("--frames", type=int, default=0, help="first frames of each sequence (0 = all)")
+    p.add_argument("--lag", type=float, default=DEPTH_LAG_FRAMES,
+                   help="frames the depth trails the Kinect skeleton in the files (measured; 0: the files' pairing)")
     _add_budget_and_assets(p)
     _add_tracker_switches(p)
     p.add_argument("--json", action="store_true", help="one JSON object with the summary and every record")

@@ -14,8 +14,9 @@ Schemes (``scheme:argument``):
   the colour intrinsics instead of reading the factory calibration) (:mod:`.open3d_io`).
 * ``openni2:`` — the first OpenNI2 device; ``openni2:FILE.oni`` plays a recording;
   ``openni2:URI`` opens a device by its OpenNI URI (:mod:`.openni2`).
-* ``utdmhad:FILE.mat`` — a UTD-MHAD depth file (``aA_sS_tT_depth.mat``) with its Kinect
-  skeleton as ground truth (:mod:`.utdmhad`).
+* ``utdmhad:FILE.mat[?lag=FRAMES]`` — a UTD-MHAD depth file (``aA_sS_tT_depth.mat``) with its
+  Kinect skeleton as ground truth, in time with the depth (``lag``: the frames the depth trails
+  the skeleton, 1.75 measured, 0 the files' pairing; :mod:`.utdmhad`).
 
 A bare path to a ``.mkv``, ``.bag``, ``.oni`` or ``.mat`` file is read with that file's scheme.
 
@@ -44,7 +45,7 @@ SCHEMES = {
     "realsense": "realsense:[SERIAL|CONFIG.json] (live RealSense)",
     "azure": "azure:[INDEX][,INTRINSICS.json] (live Azure Kinect)",
     "openni2": "openni2:[FILE.oni|URI] (OpenNI2 device or recording)",
-    "utdmhad": "utdmhad:aA_sS_tT_depth.mat (UTD-MHAD depth with its Kinect skeleton)",
+    "utdmhad": "utdmhad:aA_sS_tT_depth.mat[?lag=FRAMES] (UTD-MHAD depth with its Kinect skeleton)",
 }
 _BY_SUFFIX = {".mkv": "mkv", ".bag": "bag", ".oni": "openni2", ".mat": "utdmhad"}
 
@@ -83,6 +84,21 @@ def _split(uri: str) -> tuple[str, str]:
                       + "; ".join(SCHEMES.values()))
 
 
+def _utdmhad_options(arg: str) -> tuple[str, dict[str, float]]:
+    """``FILE.mat[?lag=FRAMES]`` -> (FILE.mat, the source's keyword arguments)."""
+    file, sep, query = arg.partition("?")
+    if not sep:
+        return file, {}
+    key, eq, value = query.partition("=")
+    try:
+        if key != "lag" or not eq:
+            raise ValueError
+        return file, {"lag_frames": float(value)}
+    except ValueError:
+        raise ConfigError(f"utdmhad: cannot read the option {query!r}; the one option is ?lag=FRAMES "
+                          "(the frames the depth trails the skeleton; 0 keeps the files' pairing)") from None
+
+
 def open_source(uri: str) -> FrameSource:
     """Open the frame source ``uri`` names (see the module docstring); the caller closes it."""
     scheme, arg = _split(uri)
@@ -114,7 +130,7 @@ def open_source(uri: str) -> FrameSource:
             return OpenNI2Source(file=_existing_file(arg, "openni2"), uri=uri)
         return OpenNI2Source(device_uri=arg or None, uri=uri)
     if scheme == "utdmhad":
-        path = _existing_file(arg, "utdmhad")
         from swarmpose.sources.utdmhad import UtdMhadSource
-        return UtdMhadSource(path, uri=uri)
+        file, options = _utdmhad_options(arg)
+        return UtdMhadSource(_existing_file(file, "utdmhad"), uri=uri, **options)
     raise AssertionError(scheme)  # pragma: no cover - _split only returns known schemes

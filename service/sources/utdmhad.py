@@ -22,11 +22,16 @@ Conventions of this source:
   and wider than a rig's hip centres, its head is the head's centre) and the projected
   skeleton points (``points2d``) from which ``--detector simulated`` draws its noisy
   keypoints. There is no pose vector (``poses`` is NaN).
+* **In time with the depth**: the files pair depth frame ``t`` with a skeleton 1.75 frames
+  ahead of it (:mod:`.utdmhad_sync` measures that on the data). The ground truth and the
+  simulated detector's keypoints of frame ``t`` are the skeleton at ``t − lag`` (interpolated);
+  ``lag`` is :data:`~swarmpose.sources.utdmhad_sync.DEPTH_LAG_FRAMES` unless the URI says
+  otherwise: ``utdmhad:FILE.mat?lag=0`` keeps the files' pairing.
 * Frames are 30 per second (timestamps ``index`` x 33.3 ms).
 
 Errors (:class:`~swarmpose.core.errors.SourceError`, exit 2): a file that is not a MATLAB
 file or lacks ``d_depth`` / ``d_skel`` of the right shapes, a missing skeleton file, depth
-and skeleton of different frame counts.
+and skeleton of different frame counts, a ``lag`` that is not a number of frames within 0..10.
 """
 
 from __future__ import annotations
@@ -43,6 +48,7 @@ from swarmpose.core.errors import SourceError
 from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
 from swarmpose.sources.depth_shading import shaded_normals
 from swarmpose.sources.groundtruth import GroundTruth
+from swarmpose.sources.utdmhad_sync import DEPTH_LAG_FRAMES, synchronised
 
 WIDTH, HEIGHT = 320, 240
 INTRINSICS = Intrinsics(WIDTH, HEIGHT, 285.63, 285.63, WIDTH - 1 - 160.0, 120.0)
@@ -158,11 +164,16 @@ def measured_height(depth: np.ndarray, intrinsics: Intrinsics = INTRINSICS) -> f
 class UtdMhadSource(FrameSource):
     """The frames of one UTD-MHAD depth file (see the module docstring); everything is read when opened.
 
-    Attributes beyond :class:`FrameSource`'s: ``intrinsics``, ``ground_truth``, ``skeleton``
-    (F, 20, 3) Kinect joints in our camera frame, ``depth_file``, ``skeleton_file``.
+    Attributes beyond :class:`FrameSource`'s: ``intrinsics``, ``ground_truth`` (the skeleton
+    ``lag_frames`` behind, in time with the depth), ``skeleton`` (F, 20, 3) the file's Kinect
+    joints in our camera frame as paired in the file, ``depth_file``, ``skeleton_file``.
     """
 
-    def __init__(self, path: str | Path, uri: str | None = None):
+    def __init__(self, path: str | Path, uri: str | None = None, lag_frames: float = DEPTH_LAG_FRAMES):
+        if not (np.isfinite(lag_frames) and 0.0 <= lag_frames <= 10.0):
+            raise SourceError(f"utdmhad: lag={lag_frames} is not a number of frames within 0..10; "
+                              f"the measured lag is {DEPTH_LAG_FRAMES}, 0 keeps the files' pairing")
+        self.lag_frames = float(lag_frames)
         self.depth_file = Path(path).expanduser()
         self.uri = uri or f"utdmhad:{self.depth_file}"
         if not self.depth_file.is_file():
@@ -176,7 +187,7 @@ class UtdMhadSource(FrameSource):
                               f"{self.skeleton_file} has {len(self.skeleton)} skeletons; they must match one to one")
         self.intrinsics = INTRINSICS
         self.length = len(self.depth)
-        self.ground_truth = ground_truth(self.skeleton, self.intrinsics)
+        self.ground_truth = ground_truth(synchronised(self.skeleton, self.lag_frames), self.intrinsics)
 
     def _frames(self) -> Iterator[Frame | SkippedFrame]:
         for i, depth in enumerate(self.depth):

@@ -55,3 +55,14 @@ def test_utdmhad_records_carry_the_automatic_height_only_where_it_acts(tmp_path)
     write_record(new, {"mpjpe_mm": 64.0, **variant_settings(on, "hybrid", "default")})
     assert read_record(new, variant_settings(off, "hybrid", "default")) is None
     assert read_record(new, variant_settings(on, "hybrid", "default"))["mpjpe_mm"] == 64.0
+
+
+def test_utdmhad_records_made_before_the_skeleton_lag_read_as_the_files_pairing(tmp_path):
+    """A UTD-MHAD record without ``lag_frames`` was scored against the skeleton as the files pair
+    it (lag 0): it resumes ``--lag 0`` and not the default, measured lag."""
+    from swarmpose.sources.utdmhad_sync import DEPTH_LAG_FRAMES
+
+    old = tmp_path / "old.json"
+    write_record(old, {"mpjpe_mm": 66.1, "requested_frames": 0, **tracker_settings(None)})
+    assert read_record(old, {"requested_frames": 0, "lag_frames": 0.0, **tracker_settings(None)})["mpjpe_mm"] == 66.1
+    assert read_record(old, {"requested_frames": 0, "lag_frames": DEPTH_LAG_FRAMES, **tracker_settings(None)}) is None

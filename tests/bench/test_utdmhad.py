@@ -12,6 +12,7 @@ from swarmpose.bench.utdmhad import add_offset_scores, format_table, run_utdmhad
 from swarmpose.cli.main import main
 from swarmpose.core.errors import ConfigError
 from swarmpose.sim.evaluate import joint_errors, summarise
+from swarmpose.sources.utdmhad_sync import DEPTH_LAG_FRAMES
 
 UTD = ASSETS / "rgbd" / "utd_mhad"
 FAST = ["--particles", "8", "--generations", "4", "--quiet"]
@@ -65,6 +66,11 @@ def test_the_benchmark_tracks_scores_and_resumes(tmp_path):
     assert [r["mpjpe_mm"] for r in again] == [r["mpjpe_mm"] for r in records]
     table = format_table(again)
     assert "a23 walk" in table and "hybrid simulated default" in table and "**all**" in table
+    assert {r["lag_frames"] for r in again} == {DEPTH_LAG_FRAMES}
+    files_pairing = run_utdmhad(tmp_path, **{**kwargs, "modes": ("lift",)}, lag_frames=0.0)  # not resumed
+    assert [p.stat().st_mtime_ns for p in stored] != stamps
+    lift = next(r for r in records if r["mode"] == "lift" and r["subject"] == "s1")
+    assert next(r for r in files_pairing if r["subject"] == "s1")["mpjpe_mm"] != lift["mpjpe_mm"]
 
 
 @needs_assets

@@ -61,7 +61,7 @@ def test_utdmhad_is_unmirrored_so_the_skeletons_left_is_the_networks_left():
 
 @needs_assets
 def test_the_ground_truth_maps_kinect_joints_to_the_evaluation_joints():
-    source = UtdMhadSource(A1_S1)
+    source = UtdMhadSource(A1_S1, lag_frames=0.0)  # the files' pairing (the lag: test_utdmhad_sync.py)
     truth = source.ground_truth
     assert truth.joints3d.shape == (48, 14, 3) and np.all(np.isfinite(truth.joints3d))
     raw = source.skeleton
@@ -76,7 +76,7 @@ def test_the_ground_truth_maps_kinect_joints_to_the_evaluation_joints():
 def test_the_simulated_detector_draws_keypoints_from_the_kinect_skeleton():
     from swarmpose.detect.simulated import SimulatedDetector
 
-    source = UtdMhadSource(A1_S1)
+    source = UtdMhadSource(A1_S1, lag_frames=0.0)
     detector = SimulatedDetector(source.ground_truth, "a1_s1")
     frames = list(source)
     found = [detector.detect(f) for f in frames[:10]]
@@ -160,7 +160,7 @@ def test_untracked_kinect_joints_become_missing(tmp_path):
     skeleton[6, :, 1] = 0.0  # left_wrist untracked in frame 1
     _mat(tmp_path / "depth" / "a1_s1_t1_depth.mat", d_depth=depth)
     _mat(tmp_path / "skeleton" / "a1_s1_t1_skeleton.mat", d_skel=skeleton)
-    source = UtdMhadSource(tmp_path / "depth" / "a1_s1_t1_depth.mat")
+    source = UtdMhadSource(tmp_path / "depth" / "a1_s1_t1_depth.mat", lag_frames=0.0)
     np.testing.assert_allclose(source.skeleton[0, 6], [-0.1, -0.2, 3.0])
     assert np.all(np.isnan(source.skeleton[1, 6])) and np.all(np.isfinite(source.skeleton[1, 5]))
     truth = source.ground_truth.joints3d

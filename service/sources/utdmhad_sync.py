@@ -1,0 +1,77 @@
+"""UTD-MHAD's skeleton and depth are not paired in time: the depth frame ``t`` shows the person
+where the skeleton of frame ``t − 1.75`` puts them.
+
+Measured on the data alone, without the tracker (:func:`depth_agreement_mm`): for each trial
+lag L, the skeleton at ``t − L`` (linear interpolation between frames) is projected into
+depth frame ``t`` and its moving joints (wrists, hands, elbows, knees, ankles) and head are
+compared with the depth under them. Over the 81 sequences of subjects s1-s3
+(``scripts/utdmhad_lag.py``) the mean disagreement (each pixel's |depth − joint z| capped at
+0.5 m) is least at L = 1.75 frames for every subject: 59.7 mm against 67.9 mm with the files'
+own pairing (s1 64.9 / 73.4, s2 59.3 / 66.0, s3 54.9 / 64.3 mm), with a single minimum in the
+curve from −1 to 4 frames. About 58 ms: at 2 m/s a fist is 12 cm from where the skeleton of
+the same index says.
+
+So :class:`~swarmpose.sources.utdmhad.UtdMhadSource` compares depth frame ``t`` with the
+skeleton at ``t − DEPTH_LAG_FRAMES`` (:func:`synchronised`), for the ground truth and for the
+simulated detector's keypoints alike (a detector run on the depth sees the person of the
+depth's time). ``utdmhad:FILE?lag=0`` keeps the files' pairing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from swarmpose.core.camera import Intrinsics
+
+DEPTH_LAG_FRAMES = 1.75
+"""Frames by which UTD-MHAD's depth trails its skeleton (the measure of the module doc)."""
+
+AGREEMENT_JOINTS: tuple[str, ...] = ("head", "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hand",
+                                     "right_hand", "left_knee", "right_knee", "left_ankle", "right_ankle")
+"""The Kinect joints whose depth agreement measures the lag (the ones that move, and the head)."""
+
+CAP_M = 0.5
+"""A pixel's disagreement counts at most this much (a joint projected off the person)."""
+
+
+def synchronised(skeleton: np.ndarray, lag_frames: float) -> np.ndarray:
+    """(F, K, 3) the skeleton (F, K, 3) at ``t − lag_frames`` for every frame ``t``: linear
+    interpolation between the two nearest frames, held at the first and last frame beyond the
+    ends (people stand still there), NaN where a neighbour it uses is NaN."""
+    skeleton = np.asarray(skeleton, float)
+    count = len(skeleton)
+    at = np.clip(np.arange(count) - float(lag_frames), 0.0, count - 1.0)
+    below = np.floor(at).astype(int)
+    above = np.minimum(below + 1, count - 1)
+    weight = at - below
+    out = skeleton[below].copy()  # a whole-frame lag needs no neighbour (one untracked must not spread)
+    part = weight > 0
+    w = weight[part, None, None]
+    out[part] = (1.0 - w) * skeleton[below[part]] + w * skeleton[above[part]]
+    return out
+
+
+def depth_agreement_mm(depth: np.ndarray, skeleton: np.ndarray, joints: Sequence[int], intrinsics: Intrinsics,
+                       lags: Sequence[float], margin: int = 4) -> np.ndarray:
+    """(len(lags),) mean |depth − joint z| mm, each capped at :data:`CAP_M`, of the skeleton's
+    ``joints`` (F, K, 3 m, camera frame) at ``t − lag`` projected into depth frame ``t``
+    (depth (F, H, W) m, 0 = none), over frames ``margin .. F − margin − 1`` and the pixels
+    with depth; NaN for a lag with none."""
+    depth = np.asarray(depth)
+    frames = range(margin, len(depth) - margin)
+    out = []
+    for lag in lags:
+        points = synchronised(skeleton, lag)[:, list(joints)]
+        gaps = []
+        for t in frames:
+            p = points[t][np.all(np.isfinite(points[t]), axis=1)]
+            uv = np.round(intrinsics.project(p)).astype(int) if len(p) else np.zeros((0, 2), int)
+            inside = (uv[:, 0] >= 0) & (uv[:, 0] < depth.shape[2]) & (uv[:, 1] >= 0) & (uv[:, 1] < depth.shape[1])
+            z = depth[t][uv[inside, 1], uv[inside, 0]]
+            seen = z > 0
+            gaps.append(np.minimum(np.abs(z[seen] - p[inside][seen, 2]), CAP_M))
+        gaps = np.concatenate(gaps) if gaps else np.zeros(0)
+        out.append(1000.0 * float(gaps.mean()) if len(gaps) else float("nan"))
+    return np.array(out)
