@@ -31,7 +31,8 @@ change to the tracker, use a fresh ``--out``.
 The skeleton is compared in time with the depth: ``lag_frames`` (default
 :data:`~swarmpose.sources.utdmhad_sync.DEPTH_LAG_FRAMES`, measured on the data by
 :mod:`swarmpose.sources.utdmhad_sync`; ``--lag 0`` the files' pairing) for the ground truth and
-the simulated detector's keypoints alike.
+the simulated detector's keypoints alike. The lag is not part of a record's file name: give each
+lag its own ``--out``.
 """
 
 from __future__ import annotations

@@ -95,7 +95,7 @@ def _utdmhad_options(arg: str) -> tuple[str, dict[str, float]]:
             raise ValueError
         return file, {"lag_frames": float(value)}
     except ValueError:
-        raise ConfigError(f"utdmhad: cannot read the option {query!r}; the one option is ?lag=FRAMES "
+        raise ConfigError(f"utdmhad: cannot read the option {query!r} of {file}; the one option is ?lag=FRAMES "
                           "(the frames the depth trails the skeleton; 0 keeps the files' pairing)") from None
 
 

@@ -31,7 +31,8 @@ Conventions of this source:
 
 Errors (:class:`~swarmpose.core.errors.SourceError`, exit 2): a file that is not a MATLAB
 file or lacks ``d_depth`` / ``d_skel`` of the right shapes, a missing skeleton file, depth
-and skeleton of different frame counts, a ``lag`` that is not a number of frames within 0..10.
+and skeleton of different frame counts; :class:`~swarmpose.core.errors.ConfigError`: a ``lag``
+that is not a number of frames within 0..10.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ import numpy as np
 
 from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.core.camera import Intrinsics
-from swarmpose.core.errors import SourceError
+from swarmpose.core.errors import ConfigError, SourceError
 from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
 from swarmpose.sources.depth_shading import shaded_normals
 from swarmpose.sources.groundtruth import GroundTruth
@@ -170,9 +171,10 @@ class UtdMhadSource(FrameSource):
     """
 
     def __init__(self, path: str | Path, uri: str | None = None, lag_frames: float = DEPTH_LAG_FRAMES):
-        if not (np.isfinite(lag_frames) and 0.0 <= lag_frames <= 10.0):
-            raise SourceError(f"utdmhad: lag={lag_frames} is not a number of frames within 0..10; "
-                              f"the measured lag is {DEPTH_LAG_FRAMES}, 0 keeps the files' pairing")
+        if not (np.isfinite(lag_frames) and 0.0 <= lag_frames <= 10.0):  # the depth never leads the skeleton
+            raise ConfigError(f"utdmhad: lag={lag_frames:g} for {path} is not a number of frames within 0..10 "
+                              f"(the frames the depth trails the skeleton); the measured lag is "
+                              f"{DEPTH_LAG_FRAMES}, 0 keeps the files' pairing")
         self.lag_frames = float(lag_frames)
         self.depth_file = Path(path).expanduser()
         self.uri = uri or f"utdmhad:{self.depth_file}"

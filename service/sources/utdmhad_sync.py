@@ -14,7 +14,9 @@ the same index says.
 So :class:`~swarmpose.sources.utdmhad.UtdMhadSource` compares depth frame ``t`` with the
 skeleton at ``t − DEPTH_LAG_FRAMES`` (:func:`synchronised`), for the ground truth and for the
 simulated detector's keypoints alike (a detector run on the depth sees the person of the
-depth's time). ``utdmhad:FILE?lag=0`` keeps the files' pairing.
+depth's time). ``utdmhad:FILE?lag=0`` keeps the files' pairing. Why the files pair them so is
+not known (the dataset's recording tool is not described); the measure above and a tracker fed
+by a network on the depth alone (BENCHMARKS.md, issue 12, ninth part) both find it.
 """
 
 from __future__ import annotations
@@ -33,7 +35,11 @@ AGREEMENT_JOINTS: tuple[str, ...] = ("head", "left_elbow", "right_elbow", "left_
 """The Kinect joints whose depth agreement measures the lag (the ones that move, and the head)."""
 
 CAP_M = 0.5
-"""A pixel's disagreement counts at most this much (a joint projected off the person)."""
+"""A joint's disagreement counts at most this much (m): one that lands on another part of the
+person far behind or in front of it. A joint that lands on no depth (off the person: the
+background is removed) is left out, so each lag is averaged over the joints that land on the
+person; that count peaks at the same lag (boxing s1: 721 / 740 / 762 / 767 / 751 / 724 of 792
+at lags −1 / 0 / 1 / 1.75 / 2.5 / 4)."""
 
 
 def synchronised(skeleton: np.ndarray, lag_frames: float) -> np.ndarray:

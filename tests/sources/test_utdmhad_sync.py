@@ -8,7 +8,7 @@ import pytest
 from conftest import ASSETS, needs_assets
 from scipy.io import savemat
 
-from swarmpose.core.errors import ConfigError, SourceError
+from swarmpose.core.errors import ConfigError
 from swarmpose.sources.registry import open_source
 from swarmpose.sources.utdmhad import KINECT_JOINTS, UtdMhadSource
 from swarmpose.sources.utdmhad_sync import AGREEMENT_JOINTS, DEPTH_LAG_FRAMES, depth_agreement_mm, synchronised
@@ -50,7 +50,7 @@ def _files(folder, frames=4):
     depth = np.zeros((240, 320, frames), np.uint16)
     depth[100:140, 150:170] = 3000
     skeleton = np.tile(np.array([0.1, 0.2, 3.0]), (20, 1))[:, :, None].repeat(frames, axis=2)
-    skeleton[:, 0, :] += 0.1 * np.arange(frames)  # moving along x by 10 cm a frame
+    skeleton[[0, 6], 0, :] += 0.1 * np.arange(frames)  # the head and left wrist move along x, 10 cm a frame
     savemat(str(folder / "depth" / "a1_s1_t1_depth.mat"), {"d_depth": depth})
     savemat(str(folder / "skeleton" / "a1_s1_t1_skeleton.mat"), {"d_skel": skeleton})
     return folder / "depth" / "a1_s1_t1_depth.mat"
@@ -58,17 +58,21 @@ def _files(folder, frames=4):
 
 def test_the_source_compares_depth_with_the_skeleton_lag_frames_back(tmp_path):
     path = _files(tmp_path)
-    x_of = {}
+    x_of, wrist_px = {}, {}
     for uri in (f"utdmhad:{path}", f"utdmhad:{path}?lag=0", f"utdmhad:{path}?lag=1"):
         with open_source(uri) as source:
             x_of[uri.partition("?")[2]] = source.ground_truth.joints3d[:, 0, 0]
-            wrist = source.ground_truth.points2d[3]["left_wrist"]
+            wrist_px[uri.partition("?")[2]] = np.array([p["left_wrist"] for p in source.ground_truth.points2d])
     kinect_x = -(0.1 + 0.1 * np.arange(4))  # the Kinect's x points to the sensor's left: ours is -x
     np.testing.assert_allclose(x_of["lag=0"], kinect_x)
     np.testing.assert_allclose(x_of["lag=1"], kinect_x[[0, 0, 1, 2]])
     np.testing.assert_allclose(x_of[""], [kinect_x[0], kinect_x[0], 0.75 * kinect_x[0] + 0.25 * kinect_x[1],
                                           0.75 * kinect_x[1] + 0.25 * kinect_x[2]])  # the default, 1.75 back
-    assert np.isfinite(wrist).all()
+    # the simulated detector's keypoints move with the ground truth: the wrist's pixel by hand
+    intr = UtdMhadSource(path).intrinsics
+    for key, x in x_of.items():
+        wrist = np.column_stack([x, np.full(4, -0.2), np.full(4, 3.0)])  # Kinect (x, 0.2, 3) in our frame
+        np.testing.assert_allclose(wrist_px[key], intr.project(wrist), atol=1e-9)
 
 
 def test_a_bad_lag_is_refused_naming_the_option(tmp_path):
@@ -77,5 +81,7 @@ def test_a_bad_lag_is_refused_naming_the_option(tmp_path):
         open_source(f"utdmhad:{path}?shift=2")
     with pytest.raises(ConfigError, match=r"\?lag=FRAMES"):
         open_source(f"utdmhad:{path}?lag=soon")
-    with pytest.raises(SourceError, match="lag=-1.0 is not a number of frames within 0..10"):
+    with pytest.raises(ConfigError, match="lag=-1 for .*a1_s1_t1_depth.mat is not a number of frames within 0..10"):
         open_source(f"utdmhad:{path}?lag=-1")
+    with pytest.raises(ConfigError, match="not a number of frames"):
+        open_source(f"utdmhad:{path}?lag=nan")
