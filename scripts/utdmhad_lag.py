@@ -1,6 +1,6 @@
 """How many frames UTD-MHAD's depth trails its Kinect skeleton, measured on the data alone.
 
-Usage: .venv/bin/python scripts/utdmhad_lag.py [ASSETS]   (default ../shared/assets)
+Usage: .venv/bin/python scripts/utdmhad_lag.py [ASSETS]   (default: $SWARMPOSE_ASSETS or ../shared/assets)
 
 For every depth file of subjects s1-s3 and trial lags from -1 to 4 frames (quarter steps), the
 mean disagreement between the skeleton at ``t - lag`` and the depth under its moving joints
@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from swarmpose.bench.detect import find_assets
+from swarmpose.bench.utdmhad import sequences
 from swarmpose.sources.utdmhad import KINECT_JOINTS, UtdMhadSource
 from swarmpose.sources.utdmhad_sync import AGREEMENT_JOINTS, depth_agreement_mm
 
@@ -23,9 +25,7 @@ LAGS = np.arange(-1.0, 4.01, 0.25)
 
 
 def main(assets: Path) -> None:
-    files = sorted((assets / "rgbd" / "utd_mhad" / "depth").glob("a*_s[123]_t*_depth.mat"))
-    if not files:
-        raise SystemExit(f"no UTD-MHAD depth files under {assets}/rgbd/utd_mhad/depth")
+    files = sequences(assets)  # subjects s1-s3, every action; ConfigError when there are none
     joints = [KINECT_JOINTS.index(j) for j in AGREEMENT_JOINTS]
     curves = defaultdict(list)
     for path in files:
@@ -41,4 +41,4 @@ def main(assets: Path) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parents[1] / ".." / "shared" / "assets")
+    main(find_assets(sys.argv[1] if len(sys.argv) > 1 else None))

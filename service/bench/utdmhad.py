@@ -55,7 +55,7 @@ from swarmpose.core.progress import progress_bar
 from swarmpose.pipeline.config import ServiceConfig
 from swarmpose.sim.evaluate import joint_errors, summarise
 from swarmpose.sources.utdmhad import UtdMhadSource, measured_height
-from swarmpose.sources.utdmhad_sync import DEPTH_LAG_FRAMES
+from swarmpose.sources.utdmhad_sync import DEPTH_LAG_FRAMES, check_lag
 from swarmpose.tracking.config import TrackerConfig
 
 FOLDER = "rgbd/utd_mhad/depth"
@@ -115,7 +115,7 @@ def track_sequence(path: Path, mode: str, detector: str, shape: str, assets: Pat
     if shape == "measured":
         height = subject_height(path.parent, match.group(2))
         shape_spec = f"height={height:.3f}"
-    config = ServiceConfig(source=f"utdmhad:{path}?lag={lag_frames:g}", detector=spec, shape=shape_spec,
+    config = ServiceConfig(source=f"utdmhad:{path}?lag={float(lag_frames)!r}", detector=spec, shape=shape_spec,
                            tracker=TrackerConfig(mode=mode, **tracker), overlay=False)
     run = track_with_truth(config, frames)
     record = {"sequence": path.name.removesuffix("_depth.mat"), "action": int(match.group(1)),
@@ -146,8 +146,7 @@ def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[s
             raise ConfigError(f"unknown {name} {bad[0]!r}; choose from {', '.join(allowed)}")
     if frames < 0:
         raise ConfigError(f"--frames must be 0 (all) or more, got {frames}")
-    if not (np.isfinite(lag_frames) and 0.0 <= lag_frames <= 10.0):
-        raise ConfigError(f"--lag must be a number of frames within 0..10, got {lag_frames}")
+    lag_frames = check_lag(lag_frames, "--lag")
     root = find_assets(assets).resolve()
     tracker = tracker_settings(tracker)
     results = Path(out) / "results"

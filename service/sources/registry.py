@@ -89,14 +89,15 @@ def _utdmhad_options(arg: str) -> tuple[str, dict[str, float]]:
     file, sep, query = arg.partition("?")
     if not sep:
         return file, {}
-    key, eq, value = query.partition("=")
+    key, _, value = query.partition("=")
     try:
-        if key != "lag" or not eq:
-            raise ValueError
-        return file, {"lag_frames": float(value)}
+        lag = float(value) if key == "lag" else None
     except ValueError:
+        lag = None
+    if lag is None:
         raise ConfigError(f"utdmhad: cannot read the option {query!r} of {file}; the one option is ?lag=FRAMES "
-                          "(the frames the depth trails the skeleton; 0 keeps the files' pairing)") from None
+                          "(the frames the depth trails the skeleton; 0 keeps the files' pairing)")
+    return file, {"lag_frames": lag}
 
 
 def open_source(uri: str) -> FrameSource:

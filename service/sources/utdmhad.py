@@ -45,11 +45,11 @@ import numpy as np
 
 from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.core.camera import Intrinsics
-from swarmpose.core.errors import ConfigError, SourceError
+from swarmpose.core.errors import SourceError
 from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
 from swarmpose.sources.depth_shading import shaded_normals
 from swarmpose.sources.groundtruth import GroundTruth
-from swarmpose.sources.utdmhad_sync import DEPTH_LAG_FRAMES, synchronised
+from swarmpose.sources.utdmhad_sync import DEPTH_LAG_FRAMES, check_lag, synchronised
 
 WIDTH, HEIGHT = 320, 240
 INTRINSICS = Intrinsics(WIDTH, HEIGHT, 285.63, 285.63, WIDTH - 1 - 160.0, 120.0)
@@ -171,11 +171,7 @@ class UtdMhadSource(FrameSource):
     """
 
     def __init__(self, path: str | Path, uri: str | None = None, lag_frames: float = DEPTH_LAG_FRAMES):
-        if not (np.isfinite(lag_frames) and 0.0 <= lag_frames <= 10.0):  # the depth never leads the skeleton
-            raise ConfigError(f"utdmhad: lag={lag_frames:g} for {path} is not a number of frames within 0..10 "
-                              f"(the frames the depth trails the skeleton); the measured lag is "
-                              f"{DEPTH_LAG_FRAMES}, 0 keeps the files' pairing")
-        self.lag_frames = float(lag_frames)
+        self.lag_frames = check_lag(lag_frames, str(path))
         self.depth_file = Path(path).expanduser()
         self.uri = uri or f"utdmhad:{self.depth_file}"
         if not self.depth_file.is_file():

@@ -26,9 +26,13 @@ from collections.abc import Sequence
 import numpy as np
 
 from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import ConfigError
 
 DEPTH_LAG_FRAMES = 1.75
 """Frames by which UTD-MHAD's depth trails its skeleton (the measure of the module doc)."""
+
+MAX_LAG_FRAMES = 10.0
+"""The largest lag accepted (the depth never leads the skeleton: no negative lags)."""
 
 AGREEMENT_JOINTS: tuple[str, ...] = ("head", "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hand",
                                      "right_hand", "left_knee", "right_knee", "left_ankle", "right_ankle")
@@ -40,6 +44,16 @@ person far behind or in front of it. A joint that lands on no depth (off the per
 background is removed) is left out, so each lag is averaged over the joints that land on the
 person; that count peaks at the same lag (boxing s1: 721 / 740 / 762 / 767 / 751 / 724 of 792
 at lags −1 / 0 / 1 / 1.75 / 2.5 / 4)."""
+
+
+def check_lag(lag_frames: float, where: str) -> float:
+    """``lag_frames`` as a float; ConfigError naming ``where`` (a file, a flag) unless it is a
+    number of frames within 0 .. :data:`MAX_LAG_FRAMES`."""
+    if not (np.isfinite(lag_frames) and 0.0 <= lag_frames <= MAX_LAG_FRAMES):
+        raise ConfigError(f"utdmhad: lag={lag_frames:g} for {where} is not a number of frames within "
+                          f"0..{MAX_LAG_FRAMES:g} (the frames the depth trails the skeleton); the measured lag is "
+                          f"{DEPTH_LAG_FRAMES}, 0 keeps the files' pairing")
+    return float(lag_frames)
 
 
 def synchronised(skeleton: np.ndarray, lag_frames: float) -> np.ndarray:
@@ -66,18 +80,18 @@ def depth_agreement_mm(depth: np.ndarray, skeleton: np.ndarray, joints: Sequence
     (depth (F, H, W) m, 0 = none), over frames ``margin .. F − margin − 1`` and the pixels
     with depth; NaN for a lag with none."""
     depth = np.asarray(depth)
-    frames = range(margin, len(depth) - margin)
+    frames = np.arange(margin, len(depth) - margin)
     out = []
     for lag in lags:
-        points = synchronised(skeleton, lag)[:, list(joints)]
-        gaps = []
-        for t in frames:
-            p = points[t][np.all(np.isfinite(points[t]), axis=1)]
-            uv = np.round(intrinsics.project(p)).astype(int) if len(p) else np.zeros((0, 2), int)
-            inside = (uv[:, 0] >= 0) & (uv[:, 0] < depth.shape[2]) & (uv[:, 1] >= 0) & (uv[:, 1] < depth.shape[1])
-            z = depth[t][uv[inside, 1], uv[inside, 0]]
-            seen = z > 0
-            gaps.append(np.minimum(np.abs(z[seen] - p[inside][seen, 2]), CAP_M))
-        gaps = np.concatenate(gaps) if gaps else np.zeros(0)
+        points = synchronised(skeleton, lag)[frames][:, list(joints)]  # (T, J, 3)
+        frame = np.repeat(frames, points.shape[1])
+        points = points.reshape(-1, 3)
+        known = np.all(np.isfinite(points), axis=1)
+        frame, points = frame[known], points[known]
+        uv = np.round(intrinsics.project(points)).astype(int) if len(points) else np.zeros((0, 2), int)
+        inside = (uv[:, 0] >= 0) & (uv[:, 0] < depth.shape[2]) & (uv[:, 1] >= 0) & (uv[:, 1] < depth.shape[1])
+        z = depth[frame[inside], uv[inside, 1], uv[inside, 0]]
+        seen = z > 0
+        gaps = np.minimum(np.abs(z[seen] - points[inside][seen, 2]), CAP_M)
         out.append(1000.0 * float(gaps.mean()) if len(gaps) else float("nan"))
     return np.array(out)

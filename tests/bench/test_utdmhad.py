@@ -12,6 +12,7 @@ from swarmpose.bench.utdmhad import add_offset_scores, format_table, run_utdmhad
 from swarmpose.cli.main import main
 from swarmpose.core.errors import ConfigError
 from swarmpose.sim.evaluate import joint_errors, summarise
+from swarmpose.sources.utdmhad import UtdMhadSource
 from swarmpose.sources.utdmhad_sync import DEPTH_LAG_FRAMES
 
 UTD = ASSETS / "rgbd" / "utd_mhad"
@@ -71,6 +72,11 @@ def test_the_benchmark_tracks_scores_and_resumes(tmp_path):
     assert [p.stat().st_mtime_ns for p in stored] != stamps
     lift = next(r for r in records if r["mode"] == "lift" and r["subject"] == "s1")
     assert next(r for r in files_pairing if r["subject"] == "s1")["mpjpe_mm"] != lift["mpjpe_mm"]
+    # each record was scored against the source's ground truth at its own lag
+    path = UTD / "depth" / "a23_s1_t1_depth.mat"
+    for variant, lag in (("lift-simulated-default", 0.0), ("hybrid-simulated-default", DEPTH_LAG_FRAMES)):
+        with np.load(tmp_path / "results" / f"a23_s1_t1-{variant}.npz") as data:
+            np.testing.assert_array_equal(data["truth"], UtdMhadSource(path, lag_frames=lag).ground_truth.joints3d[:4])
 
 
 @needs_assets
