@@ -49,7 +49,7 @@ import numpy as np
 from swarmpose.bench.accuracy import scores, track_with_truth
 from swarmpose.bench.detect import find_assets
 from swarmpose.bench.matrix import DETECTORS, MODES
-from swarmpose.bench.store import read_record, tracker_settings, write_record
+from swarmpose.bench.store import mode_settings, read_record, tracker_settings, write_record
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.progress import progress_bar
 from swarmpose.pipeline.config import ServiceConfig
@@ -127,9 +127,10 @@ def track_sequence(path: Path, mode: str, detector: str, shape: str, assets: Pat
 def variant_settings(tracker: dict, mode: str, shape: str) -> dict:
     """The tracker settings a variant's record is made and resumed with: ``auto_height`` on unless
     ``tracker`` turns it off, and off where it does nothing (a given shape, the lift mode), so that
-    records made before the setting existed still match there."""
+    records made before the setting existed still match there; ``arm_proposals`` as
+    :func:`~swarmpose.bench.store.mode_settings` has it."""
     applies = tracker.get("auto_height", True) and shape == "default" and mode != "lift"
-    return {**tracker, "auto_height": bool(applies)}
+    return {**mode_settings(tracker, mode), "auto_height": bool(applies)}
 
 
 def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[str, ...] = ("simulated",),

@@ -68,7 +68,8 @@ def _names(allowed: tuple[str, ...]):
 def cmd_bench_accuracy(args: argparse.Namespace) -> int:
     """The tracker over the benchmark matrix: per cell and mode Δ, A(100), lost frames, facing."""
     tracker = {"particles": args.particles, "generations": args.generations, "max_people": args.max_people,
-               "arm_prior": args.arm_prior, "limb_flips": args.limb_flips, "hidden_lifts": args.hidden_lifts}
+               "arm_prior": args.arm_prior, "limb_flips": args.limb_flips, "hidden_lifts": args.hidden_lifts,
+               "arm_proposals": args.arm_proposals}
     records = run_matrix(Path(args.out), subset=args.subset, detectors=args.detectors, modes=args.modes,
                          frames=args.frames, tracker=tracker, assets=args.assets, progress=not quiet(args),
                          seeds=args.seeds)
@@ -88,7 +89,8 @@ def cmd_bench_accuracy(args: argparse.Namespace) -> int:
 def cmd_bench_utdmhad(args: argparse.Namespace) -> int:
     """The tracker on UTD-MHAD's real Kinect sequences against the Kinect skeleton."""
     tracker = {"particles": args.particles, "generations": args.generations, "arm_prior": args.arm_prior,
-               "limb_flips": args.limb_flips, "hidden_lifts": args.hidden_lifts, "auto_height": args.auto_height}
+               "limb_flips": args.limb_flips, "hidden_lifts": args.hidden_lifts, "auto_height": args.auto_height,
+               "arm_proposals": args.arm_proposals}
     records = run_utdmhad(Path(args.out), modes=args.modes, detectors=args.detectors, shapes=args.shapes,
                           frames=args.frames, tracker=tracker, subjects=args.subjects,
                           actions=tuple(int(a) for a in args.actions), assets=args.assets,
@@ -125,8 +127,8 @@ def _add_assets(p: argparse.ArgumentParser) -> None:
 
 
 def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
-    """--arm-prior, --limb-flips and --hidden-lifts of the resumable tracking benchmarks (a record keeps
-    them, so a resume with other values tracks again)."""
+    """--arm-prior, --limb-flips, --hidden-lifts and --arm-proposals of the resumable tracking
+    benchmarks (a record keeps them, so a resume with other values tracks again)."""
     p.add_argument("--arm-prior", type=non_negative_float, default=0.0,
                    help="the tracker's w_A (cost per rad² of the arms away from rest, times how side on the "
                         "person stands; 0 = off, the tracker's default)")
@@ -135,6 +137,9 @@ def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hidden-lifts", action=argparse.BooleanOptionalAction, default=True,
                    help="the lifts of limb joints the track's body hides leave the 3D term (on: the tracker's "
                         "default)")
+    p.add_argument("--arm-proposals", action=argparse.BooleanOptionalAction, default=True,
+                   help="arms sent to unexplained depth within reach and to the other arm's mirror image as "
+                        "particles (on: the tracker's default)")
 
 
 def _add_budget_and_assets(p: argparse.ArgumentParser) -> None:

@@ -9,10 +9,12 @@ Per frame (:meth:`BodyTracker.step`):
 2. **Start**. With a previous solution (state *tracking*), particles start around it in a
    region that contains J^e (:mod:`swarmpose.tracking.search`); the last 5 solutions and
    the J^e torso pose are injected as particles, and so are the previous solution's limbs
-   mirrored along the line of sight (:mod:`swarmpose.tracking.limb_flips`, ``limb_flips``);
-   every ``recheck`` frames the start's facings, refitted from the detection, compete as
-   particles too. Without one (the first frame, or
-   after the track was lost: state *init*), the torso pose of J^e
+   mirrored along the line of sight (:mod:`swarmpose.tracking.limb_flips`, ``limb_flips``),
+   and its arms sent to depth within reach that its body does not explain and to each other's
+   mirror image (:mod:`swarmpose.tracking.arm_proposals`, ``arm_proposals``); every
+   ``recheck`` frames the start's facings, refitted from the detection, compete as particles
+   too. Without one (the first frame, or after the track was lost: state *init*), the torso
+   pose of J^e
    (:func:`swarmpose.tracking.init_pose.torso_pose`) with the body's rest angles, turned
    to each of four facings (side and back views make its facing unreliable), starts one
    PSO over wide angle ranges each; the best fit by the objective is the centre of the
@@ -43,6 +45,7 @@ from swarmpose.gpu.scorer import ParticleScorer
 from swarmpose.gpu.tile import box_around
 from swarmpose.sources.base import Frame
 from swarmpose.tracking import search, verdict
+from swarmpose.tracking.arm_proposals import arm_proposals
 from swarmpose.tracking.config import MODE_WEIGHTS, TrackerConfig
 from swarmpose.tracking.hidden_lifts import without_hidden_lifts
 from swarmpose.tracking.init_pose import FACINGS_DEG, torso_pose, turned
@@ -236,6 +239,10 @@ class BodyTracker:
             start = search.spread(centre, pso.particles, rng, 0.04 + offset, 0.15, radius)
             seeds = ([centre] + ([self.challenger] if self.challenger is not None else [])
                      + self.history[-HISTORY:][::-1] + ([torso] if torso is not None else []) + recheck)
+            if self.config.arm_proposals and self.config.mode != "joints":  # proposals the depth judges
+                t_arms = time.perf_counter()
+                seeds += arm_proposals(self.body, centre, depth, self.intrinsics, self.search_box(centre, targets))
+                timings["arms"] = 1000 * (time.perf_counter() - t_arms)
             room = pso.particles - len(seeds)
             if self.config.limb_flips and room > 0:
                 t_flips = time.perf_counter()

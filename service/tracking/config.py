@@ -58,6 +58,9 @@ class TrackerConfig:
                                minimum=0.0)
     limb_flips: bool = setting(True, "every frame, each limb of the last solution mirrored along the line of sight "
                                      "(same image, other depth) joins the swarm as a particle")
+    arm_proposals: bool = setting(True, "every frame, each arm of the last solution sent to observed depth within its "
+                                        "reach that the body does not explain, and to the other arm's mirror "
+                                        "image, joins the swarm as a particle")
     hidden_lifts: bool = setting(True, "a limb joint the last solution hides behind its own body, where the depth "
                                        "shows that occluder, leaves the 3D joint term (its lift measured the "
                                        "occluder); the 2D term keeps it")

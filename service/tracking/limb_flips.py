@@ -107,12 +107,14 @@ def flip_targets(pivot: np.ndarray, middle: np.ndarray, end: np.ndarray) -> list
 def solve_limbs(body: SkinnedBody, pose: np.ndarray, limbs: Sequence[tuple[str, str, str]],
                 targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """K copies of ``pose`` (36,), each with one limb's 4 angles (:func:`limb_columns`) moved so
-    that its middle and end points reach their targets.
+    that its middle and end points reach their targets; ``pose`` (K, 36): each candidate solved
+    from its own start.
 
     limbs: K (pivot, middle, end) point names out of :data:`FLIP_LIMBS`; targets: (K, 2, 3) m, the
     middle's and the end's. Returns the solved poses (K, 36) and each one's larger miss (K,) m."""
     k = len(limbs)
-    x = np.repeat(np.asarray(pose, dtype=np.float64)[None], k, axis=0)
+    pose = np.asarray(pose, dtype=np.float64)
+    x = np.repeat(pose[None], k, axis=0) if pose.ndim == 1 else pose.copy()
     cols = np.stack([limb_columns(limb) for limb in limbs])
     lo, hi = ANGLE_LIMITS[cols - 7, 0], ANGLE_LIMITS[cols - 7, 1]
     names = tuple(dict.fromkeys(n for _, middle, end in limbs for n in (middle, end)))

@@ -16,13 +16,13 @@ def test_a_record_is_read_back_only_with_its_own_settings(tmp_path):
 
 
 def test_a_record_made_before_a_setting_existed_reads_as_what_the_tracker_did_then(tmp_path):
-    """Records written before arm_prior, limb_flips and hidden_lifts existed lack them: they were
-    made with the prior off (0, still its default), without flips and with every lift in the 3D
-    term (both on by default now), so they resume a run with those off, and neither the default run
-    nor one with the prior on."""
+    """Records written before arm_prior, limb_flips, hidden_lifts and arm_proposals existed lack
+    them: they were made with the prior off (0, still its default), without flips, with every lift
+    in the 3D term and without arm proposals (on by default now), so they resume a run with those
+    off, and neither the default run nor one with the prior on."""
     path = tmp_path / "old.json"
     write_record(path, {"mpjpe_mm": 50.0, "particles": 64, "generations": 64, "max_people": 1})
-    then = {"limb_flips": False, "hidden_lifts": False}
+    then = {"limb_flips": False, "hidden_lifts": False, "arm_proposals": False}
     assert read_record(path, tracker_settings(then))["mpjpe_mm"] == 50.0
     assert read_record(path, tracker_settings(None)) is None, "the default run has flips"
     assert read_record(path, tracker_settings({"limb_flips": False})) is None, "and drops hidden lifts"
@@ -49,7 +49,9 @@ def test_utdmhad_records_carry_the_automatic_height_only_where_it_acts(tmp_path)
     assert read_record(old, variant_settings(off, "hybrid", "default"))["mpjpe_mm"] == 70.0
     assert read_record(old, variant_settings(on, "hybrid", "default")) is None
     assert read_record(old, variant_settings(on, "hybrid", "measured"))["mpjpe_mm"] == 70.0
-    assert read_record(old, variant_settings(on, "lift", "default"))["mpjpe_mm"] == 70.0
+    old_lift = tmp_path / "old_lift.json"
+    write_record(old_lift, {"mpjpe_mm": 55.0, **tracker_settings({"arm_proposals": False})})
+    assert read_record(old_lift, variant_settings(on, "lift", "default"))["mpjpe_mm"] == 55.0
     assert variant_settings(tracker_settings(None), "hybrid", "default")["auto_height"] is True  # the default
     new = tmp_path / "new.json"
     write_record(new, {"mpjpe_mm": 64.0, **variant_settings(on, "hybrid", "default")})
@@ -66,3 +68,17 @@ def test_utdmhad_records_made_before_the_skeleton_lag_read_as_the_files_pairing(
     write_record(old, {"mpjpe_mm": 66.1, "requested_frames": 0, **tracker_settings(None)})
     assert read_record(old, {"requested_frames": 0, "lag_frames": 0.0, **tracker_settings(None)})["mpjpe_mm"] == 66.1
     assert read_record(old, {"requested_frames": 0, "lag_frames": DEPTH_LAG_FRAMES, **tracker_settings(None)}) is None
+
+
+def test_records_of_the_modes_the_arm_proposals_do_not_act_in_resume_without_them(tmp_path):
+    """The joints and lift modes have no depth term to judge arm proposals, so their records are
+    made and resumed with the setting off: one made before it existed resumes a default run."""
+    from swarmpose.bench.store import mode_settings
+
+    old = tmp_path / "old.json"
+    write_record(old, {"mpjpe_mm": 90.0, **tracker_settings({"arm_proposals": False})})
+    for mode in ("joints", "lift"):
+        assert read_record(old, mode_settings(tracker_settings(None), mode))["mpjpe_mm"] == 90.0
+    for mode in ("hybrid", "depth"):
+        assert read_record(old, mode_settings(tracker_settings(None), mode)) is None
+        assert mode_settings(tracker_settings({"arm_proposals": False}), mode)["arm_proposals"] is False
