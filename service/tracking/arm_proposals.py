@@ -59,10 +59,14 @@ ACROSS_M = 0.10
 """An arm reaches for points on its own side of the torso's middle plane or at most this far past
 it: seen from the side, the far arm's reach takes in the near arm's surface in front of the chest,
 and a far arm sent there through the chest drew a dance's track into a mirrored facing."""
+REACH_SHARE = 0.98
+"""A wrist target farther than this share of the arm's reach is drawn in to it: a straight arm
+sits on its joint limit, where the Gauss-Newton solve stalls."""
 JOINT_BEHIND_M = 0.03
 """The wrist joint lies this far behind the surface the camera sees (the hand's half thickness)."""
 MAX_POINTS = 4000
-"""The depth inside the box is sampled on a grid coarse enough to give at most this many points."""
+"""The depth inside the box is sampled on a regular grid of about this many points (the grid step
+is rounded up to whole pixels, so a few more at most)."""
 
 
 def surface_distance(body: SkinnedBody, pose: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -80,7 +84,7 @@ def surface_distance(body: SkinnedBody, pose: np.ndarray, points: np.ndarray) ->
 def observed_points(depth: np.ndarray, intrinsics: Intrinsics,
                     box: tuple[float, float, float, float]) -> tuple[np.ndarray, np.ndarray]:
     """The valid depth (H, W) m inside ``box`` (u0, v0, width, height) px, sampled on a regular
-    grid of at most :data:`MAX_POINTS`: the points (N, 3) m in the camera frame and the area (N,)
+    grid of about :data:`MAX_POINTS`: the points (N, 3) m in the camera frame and the area (N,)
     m² of the surface each one stands for (its grid cell seen at its depth)."""
     h, w = depth.shape
     u0, v0 = max(int(box[0]), 0), max(int(box[1]), 0)
@@ -101,7 +105,8 @@ def elbow_between(shoulder: np.ndarray, wrist: np.ndarray, upper: float, lower: 
                   near: np.ndarray) -> np.ndarray:
     """The elbow (3,) m at ``upper`` m from ``shoulder`` and ``lower`` m from ``wrist`` (all (3,)) that
     is nearest ``near`` (3,): on the circle where the two spheres meet (the straight arm's point
-    when the wrist is at full reach or beyond)."""
+    when the wrist is at full reach or beyond; for a wrist nearer the shoulder than the bones'
+    difference, the circle of the arm folded as far as it goes, in the wrist's direction)."""
     axis = wrist - shoulder
     d = float(np.linalg.norm(axis))
     if d < 1e-9:
@@ -109,20 +114,22 @@ def elbow_between(shoulder: np.ndarray, wrist: np.ndarray, upper: float, lower: 
     axis = axis / d
     if d >= upper + lower:
         return shoulder + upper * axis
+    d = max(d, abs(upper - lower))  # a wrist nearer than the bones can fold: as folded as they go
     along = (d * d + upper * upper - lower * lower) / (2.0 * d)
     radius = np.sqrt(max(upper * upper - along * along, 0.0))
     centre = shoulder + along * axis
     side = (near - centre) - ((near - centre) @ axis) * axis
-    if np.linalg.norm(side) < 1e-9:  # the last elbow on the axis: any side, take the one below
-        side = np.array([0.0, 1.0, 0.0]) - axis[1] * axis
+    if np.linalg.norm(side) < 1e-9:  # the last elbow on the axis: any side, across the least parallel camera axis
+        side = np.cross(axis, np.eye(3)[int(np.argmin(np.abs(axis)))])
     return centre + radius * side / np.linalg.norm(side)
 
 
 def wrist_target(points: np.ndarray, area: np.ndarray, shoulder: np.ndarray, reach: float) -> np.ndarray | None:
     """Where an arm of ``reach`` m from ``shoulder`` (3,) would put its wrist to explain the
-    unexplained points (N, 3) with their areas (N,) m²: the cluster farthest from the shoulder,
-    moved :data:`JOINT_BEHIND_M` away from the camera and drawn within reach; None when the
-    points within reach cover less than :data:`MIN_AREA_M2`."""
+    unexplained points (N, 3) with their areas (N,) m²: the cluster farthest from the shoulder
+    among the points within ``reach`` + :data:`HAND_M`, moved :data:`JOINT_BEHIND_M` away from the
+    camera and drawn in to :data:`REACH_SHARE` of the reach; None when those points cover less
+    than :data:`MIN_AREA_M2`."""
     distance = np.linalg.norm(points - shoulder, axis=1)
     near = distance <= reach + HAND_M
     if area[near].sum() < MIN_AREA_M2:
@@ -133,7 +140,7 @@ def wrist_target(points: np.ndarray, area: np.ndarray, shoulder: np.ndarray, rea
     target = target + JOINT_BEHIND_M * target / np.linalg.norm(target)
     offset = target - shoulder
     length = float(np.linalg.norm(offset))
-    return target if length <= 0.98 * reach else shoulder + 0.98 * reach * offset / length
+    return target if length <= REACH_SHARE * reach else shoulder + REACH_SHARE * reach * offset / length
 
 
 def on_own_side(points: np.ndarray, at: dict[str, np.ndarray], arm: tuple[str, str, str]) -> np.ndarray:
@@ -150,8 +157,8 @@ def on_own_side(points: np.ndarray, at: dict[str, np.ndarray], arm: tuple[str, s
 def mirrored_arm_targets(at: dict[str, np.ndarray]) -> list[tuple[tuple[str, str, str], np.ndarray]]:
     """Per arm, its (elbow, wrist) targets (2, 3) m: the other arm's reflected through the
     torso's middle plane (through the shoulders' midpoint, across the shoulder line), from the
-    named points ``at`` (name -> (3,) m); only where they lie :data:`EXPLAINED_M` or more from
-    the arm's own wrist."""
+    named points ``at`` (name -> (3,) m); only where the mirrored wrist lies :data:`EXPLAINED_M` or
+    more from the arm's own wrist."""
     left, right = at["left_shoulder"], at["right_shoulder"]
     normal = left - right
     if np.linalg.norm(normal) < 1e-6:

@@ -239,9 +239,10 @@ class BodyTracker:
             start = search.spread(centre, pso.particles, rng, 0.04 + offset, 0.15, radius)
             seeds = ([centre] + ([self.challenger] if self.challenger is not None else [])
                      + self.history[-HISTORY:][::-1] + ([torso] if torso is not None else []) + recheck)
-            if self.config.arm_proposals and self.config.mode != "joints":  # proposals the depth judges
-                t_arms = time.perf_counter()
-                seeds += arm_proposals(self.body, centre, depth, self.intrinsics, self.search_box(centre, targets))
+            box = self.search_box(centre, targets)
+            if self.config.arm_proposals and self.config.mode != "joints" and len(seeds) < pso.particles:
+                t_arms = time.perf_counter()  # proposals the depth judges, as many as the swarm has room for
+                seeds += arm_proposals(self.body, centre, depth, self.intrinsics, box)[:pso.particles - len(seeds)]
                 timings["arms"] = 1000 * (time.perf_counter() - t_arms)
             room = pso.particles - len(seeds)
             if self.config.limb_flips and room > 0:
@@ -252,7 +253,8 @@ class BodyTracker:
             start[i] = s
 
         t1 = time.perf_counter()
-        self.objective.set_frame(depth, self.search_box(centre, targets), targets, centre)
+        self.objective.set_frame(depth, box if state == "tracking" else self.search_box(centre, targets), targets,
+                                 centre)
         self.objective.take_spent()
         result = self._search(self.objective, start, rng, pso)
         timings["pso"] = 1000 * (time.perf_counter() - t1)

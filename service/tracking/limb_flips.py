@@ -114,6 +114,8 @@ def solve_limbs(body: SkinnedBody, pose: np.ndarray, limbs: Sequence[tuple[str, 
     middle's and the end's. Returns the solved poses (K, 36) and each one's larger miss (K,) m."""
     k = len(limbs)
     pose = np.asarray(pose, dtype=np.float64)
+    if pose.shape not in ((36,), (k, 36)):
+        raise ValueError(f"pose must be (36,) or ({k}, 36) for {k} limbs, got {pose.shape}")
     x = np.repeat(pose[None], k, axis=0) if pose.ndim == 1 else pose.copy()
     cols = np.stack([limb_columns(limb) for limb in limbs])
     lo, hi = ANGLE_LIMITS[cols - 7, 0], ANGLE_LIMITS[cols - 7, 1]

@@ -15,14 +15,16 @@ from swarmpose.tracking.arm_proposals import (
     JOINT_BEHIND_M,
     MIN_AREA_M2,
     REACH_ARMS,
+    REACH_SHARE,
     arm_proposals,
     elbow_between,
     mirrored_arm_targets,
     observed_points,
     on_own_side,
+    solved_arms,
     wrist_target,
 )
-from swarmpose.tracking.limb_flips import solve_limbs
+from swarmpose.tracking.limb_flips import limb_columns, solve_limbs
 
 SIDE_ON = (0.0, np.cos(np.pi / 4), 0.0, np.sin(np.pi / 4))
 """The root quaternion of a body turned side on to the camera (FACING, then a quarter turn about the
@@ -56,6 +58,13 @@ def test_elbow_between_keeps_both_bones_and_is_the_circles_point_nearest_the_las
     # a wrist beyond reach: the straight arm's elbow, on the line to it
     far = shoulder + np.array([0.0, 0.0, -1.0])
     assert np.allclose(elbow_between(shoulder, far, upper, lower, near), shoulder + [0.0, 0.0, -upper])
+    # a wrist nearer than the bones can fold: the elbow still on the upper arm's sphere, the forearm
+    # folded back over it; the last elbow on the line: a point of the circle all the same, no NaN
+    folded = elbow_between(shoulder, shoulder + [0.0, 0.0, -0.01], upper, lower, near)
+    assert np.isclose(np.linalg.norm(folded - shoulder), upper)
+    assert np.isclose(np.linalg.norm(folded - (shoulder + [0.0, 0.0, -(upper - lower)])), lower)
+    on_line = elbow_between(shoulder, wrist, upper, lower, shoulder + 2 * (wrist - shoulder))
+    assert np.isclose(np.linalg.norm(on_line - shoulder), upper) and np.isclose(np.linalg.norm(on_line - wrist), lower)
 
 
 def test_observed_points_back_project_the_box_and_cover_its_area():
@@ -82,6 +91,10 @@ def test_wrist_target_is_the_far_cluster_behind_its_surface_within_reach():
     ray = hand.mean(axis=0) / np.linalg.norm(hand.mean(axis=0))
     assert np.linalg.norm(target - (hand.mean(axis=0) + JOINT_BEHIND_M * ray)) < 0.02
     assert np.linalg.norm(target - shoulder) <= reach
+    # a hand beyond the arm's reach but within a hand of it: the wrist drawn in to REACH_SHARE of the reach
+    out = np.array([0.0, -0.5, 3.0 - (reach + 0.5 * HAND_M)]) + rng.normal(0.0, 0.01, (40, 3))
+    drawn = wrist_target(out, np.full(40, 2e-4), shoulder, reach)
+    assert np.isclose(np.linalg.norm(drawn - shoulder), REACH_SHARE * reach)
     # beyond the hand's reach the points are not the arm's; too little surface is no arm either
     assert wrist_target(points + [0.0, 0.0, -(reach + HAND_M)], area, shoulder, reach) is None
     assert wrist_target(hand, np.full(40, 0.5 * MIN_AREA_M2 / 40), shoulder, reach) is None
@@ -114,6 +127,43 @@ def test_mirrored_targets_reflect_the_other_arm_through_the_torsos_middle_plane(
         expected = at[name] * [-1.0, 1.0, 1.0] + [2 * middle_x, 0.0, 0.0]
         assert np.linalg.norm(got - expected) < 0.01  # the shoulders' line is level to the rig's precision
     assert np.linalg.norm(targets[REACH_ARMS[0]][1] - at["left_wrist"]) > EXPLAINED_M
+
+
+def test_solved_arms_keep_per_arm_the_closer_of_the_last_pose_and_rest_starts(body):
+    """Oracle: each arm solved alone by solve_limbs from each start. From arms twisted up to 1.5 rad
+    away from rest, some targets a swing away are reached only from the rest start."""
+    rest = body.rest_pose((0.0, 0.0, 3.0), FACING)
+    at = dict(zip(ARM_NAMES, body.posed_points(rest[None], ARM_NAMES)[0]))
+    last = rest.copy()
+    rng = np.random.default_rng(1)
+    for arm in REACH_ARMS:
+        last[limb_columns(arm)] += rng.uniform(-1.5, 1.5, 4)
+    limbs, targets = [], []
+    for arm in REACH_ARMS:
+        s, e, w = (at[n] for n in arm)
+        up, low = np.linalg.norm(e - s), np.linalg.norm(w - e)
+        for direction in ([0, 0, -1], [1, 0, -0.2], [0, -1, 0], [-0.3, 0.5, -1]):
+            d = np.array(direction, float) / np.linalg.norm(direction)
+            limbs.append(arm)
+            targets.append([s + up * d, s + (up + low) * d])
+    targets = np.asarray(targets)
+    got = solved_arms(body, last, limbs, targets)
+    expected, rest_won = [], 0
+    for k, arm in enumerate(limbs):
+        start_rest = last.copy()
+        start_rest[limb_columns(arm)] = body.rest_angles[limb_columns(arm) - 7]
+        a, miss_a = solve_limbs(body, last, [arm], targets[k:k + 1])
+        b, miss_b = solve_limbs(body, start_rest, [arm], targets[k:k + 1])
+        best, miss = (a[0], miss_a[0]) if miss_a[0] <= miss_b[0] else (b[0], miss_b[0])
+        rest_won += int(miss_b[0] <= 0.04 < miss_a[0])
+        if miss <= 0.04:
+            expected.append(best)
+    assert rest_won >= 1, "the case the rest start is there for"
+    assert len(got) == len(expected) >= 1
+    for g, e in zip(got, expected):
+        assert np.allclose(g, e, atol=1e-9)
+    with pytest.raises(ValueError):
+        solve_limbs(body, np.repeat(last[None], 2, axis=0), limbs, targets)
 
 
 def side_view(body, intr):
@@ -156,7 +206,7 @@ def test_a_proposal_sends_the_near_arm_to_the_depth_in_front_of_the_shoulder(bod
     at = dict(zip(ARM_NAMES, body.posed_points(truth[None], ARM_NAMES)[0]))
     mirrored = [target[1] for _, target in mirrored_arm_targets(at)]
     again = arm_proposals(body, truth, depth, intr, box)
-    assert len(again) <= len(mirrored) == 2
+    assert 1 <= len(again) <= len(mirrored) == 2
     for pose in again:
         wrists = body.posed_points(pose[None], ("left_wrist", "right_wrist"))[0]
         assert min(np.linalg.norm(w - m) for w in wrists for m in mirrored) < 0.04
