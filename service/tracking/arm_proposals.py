@@ -37,6 +37,7 @@ import numpy as np
 
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
+from swarmpose.tracking.body_scene import body_scene
 from swarmpose.tracking.limb_flips import MAX_MISS_M, limb_columns, solve_limbs
 
 REACH_ARMS: tuple[tuple[str, str, str], ...] = (("left_shoulder", "left_elbow", "left_wrist"),
@@ -69,15 +70,12 @@ MAX_POINTS = 4000
 is rounded up to whole pixels, so a few more at most)."""
 
 
-def surface_distance(body: SkinnedBody, pose: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(N,) m: the distance of each point (N, 3) m to the surface of ``body`` posed at ``pose`` (36,)
-    (Open3D's exact point-to-triangle distance; a vertex's distance would miss by half the decimated
-    mesh's 5-10 cm edges)."""
+def surface_distance(scene, points: np.ndarray) -> np.ndarray:
+    """(N,) m: the distance of each point (N, 3) m to the posed body of ``scene``
+    (:func:`~swarmpose.tracking.body_scene.body_scene`; Open3D's exact point-to-triangle distance:
+    a vertex's distance would miss by half the decimated mesh's 5-10 cm edges)."""
     import open3d as o3d
 
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(body.pose(pose[None])[0], np.float32)),
-                        o3d.core.Tensor(np.ascontiguousarray(body.triangles, np.uint32)))
     return scene.compute_distance(o3d.core.Tensor(np.ascontiguousarray(points, np.float32))).numpy().astype(float)
 
 
@@ -143,35 +141,38 @@ def wrist_target(points: np.ndarray, area: np.ndarray, shoulder: np.ndarray, rea
     return target if length <= REACH_SHARE * reach else shoulder + REACH_SHARE * reach * offset / length
 
 
-def on_own_side(points: np.ndarray, at: dict[str, np.ndarray], arm: tuple[str, str, str]) -> np.ndarray:
-    """(N,) bool: the points (N, 3) m on ``arm``'s side of the torso's middle plane (through the
-    shoulders' midpoint, across the shoulder line) or at most :data:`ACROSS_M` past it, from the
-    named points ``at`` (name -> (3,) m)."""
+def middle_plane(at: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The torso's middle plane from the named points ``at`` (name -> (3,) m): a point (3,), the
+    shoulders' midpoint, and its unit normal (3,) towards the left shoulder; None when the
+    shoulders coincide."""
     left, right = at["left_shoulder"], at["right_shoulder"]
-    across = left - right
-    across = across / max(float(np.linalg.norm(across)), 1e-9)
-    side = (points - 0.5 * (left + right)) @ across
+    normal = left - right
+    length = float(np.linalg.norm(normal))
+    return None if length < 1e-6 else (0.5 * (left + right), normal / length)
+
+
+def on_own_side(points: np.ndarray, at: dict[str, np.ndarray], arm: tuple[str, str, str]) -> np.ndarray:
+    """(N,) bool: the points (N, 3) m on ``arm``'s side of the torso's :func:`middle_plane` or at
+    most :data:`ACROSS_M` past it, from the named points ``at`` (name -> (3,) m); all of them when
+    the shoulders coincide."""
+    plane = middle_plane(at)
+    if plane is None:
+        return np.ones(len(points), bool)
+    side = (points - plane[0]) @ plane[1]
     return (side if arm[0] == "left_shoulder" else -side) >= -ACROSS_M
 
 
 def mirrored_arm_targets(at: dict[str, np.ndarray]) -> list[tuple[tuple[str, str, str], np.ndarray]]:
-    """Per arm, its (elbow, wrist) targets (2, 3) m: the other arm's reflected through the
-    torso's middle plane (through the shoulders' midpoint, across the shoulder line), from the
-    named points ``at`` (name -> (3,) m); only where the mirrored wrist lies :data:`EXPLAINED_M` or
-    more from the arm's own wrist."""
-    left, right = at["left_shoulder"], at["right_shoulder"]
-    normal = left - right
-    if np.linalg.norm(normal) < 1e-6:
+    """Per arm, its (elbow, wrist) targets (2, 3) m: the other arm's reflected through the torso's
+    :func:`middle_plane`, from the named points ``at`` (name -> (3,) m); only where the mirrored
+    wrist lies :data:`EXPLAINED_M` or more from the arm's own wrist."""
+    plane = middle_plane(at)
+    if plane is None:
         return []
-    normal = normal / np.linalg.norm(normal)
-    middle = 0.5 * (left + right)
-
-    def reflect(p: np.ndarray) -> np.ndarray:
-        return p - 2.0 * ((p - middle) @ normal) * normal
-
+    middle, normal = plane
     out = []
     for arm, other in zip(REACH_ARMS, REACH_ARMS[::-1]):
-        target = np.stack([reflect(at[other[1]]), reflect(at[other[2]])])
+        target = np.stack([p - 2.0 * ((p - middle) @ normal) * normal for p in (at[other[1]], at[other[2]])])
         if np.linalg.norm(target[1] - at[arm[2]]) >= EXPLAINED_M:
             out.append((arm, target))
     return out
@@ -197,17 +198,18 @@ def solved_arms(body: SkinnedBody, pose: np.ndarray, limbs: list[tuple[str, str,
 
 
 def arm_proposals(body: SkinnedBody, pose: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics,
-                  box: tuple[float, float, float, float]) -> list[np.ndarray]:
+                  box: tuple[float, float, float, float], scene=None) -> list[np.ndarray]:
     """Copies (36,) of ``pose`` (36,) with one arm moved (module doc): to the observed depth (H, W) m
     inside ``box`` (u0, v0, width, height) px that the posed body does not explain, and to the
-    other arm's mirror image; at most three per arm."""
+    other arm's mirror image; at most three per arm. scene: the posed body's
+    :func:`~swarmpose.tracking.body_scene.body_scene` when the caller has it (None: built here)."""
     pose = np.asarray(pose, dtype=np.float64)
     names = tuple(n for arm in REACH_ARMS for n in arm)
     at = dict(zip(names, body.posed_points(pose[None], names)[0]))
     proposals = mirrored_arm_targets(at)
     points, area = observed_points(depth, intrinsics, box)
     if len(points):
-        far = surface_distance(body, pose, points) > EXPLAINED_M
+        far = surface_distance(body_scene(body, pose) if scene is None else scene, points) > EXPLAINED_M
         points, area = points[far], area[far]
     for arm in REACH_ARMS if area.sum() >= MIN_AREA_M2 else ():
         shoulder, elbow, wrist = (at[n] for n in arm)

@@ -14,11 +14,10 @@ Per frame (:meth:`BodyTracker.step`):
    mirror image (:mod:`swarmpose.tracking.arm_proposals`, ``arm_proposals``); every
    ``recheck`` frames the start's facings, refitted from the detection, compete as particles
    too. Without one (the first frame, or after the track was lost: state *init*), the torso
-   pose of J^e
-   (:func:`swarmpose.tracking.init_pose.torso_pose`) with the body's rest angles, turned
-   to each of four facings (side and back views make its facing unreliable), starts one
-   PSO over wide angle ranges each; the best fit by the objective is the centre of the
-   normal search, the others join it as particles. No manual initialisation.
+   pose of J^e (:func:`swarmpose.tracking.init_pose.torso_pose`) with the body's rest angles,
+   turned to each of four facings (side and back views make its facing unreliable), starts one
+   PSO over wide angle ranges each; the best fit by the objective is the centre of the normal
+   search, the others join it as particles. No manual initialisation.
 3. **Search**. PSO (canonical or perturbed) of ``E = w_D·E_D + w_J·E_J``.
 4. **Verdict** (:mod:`swarmpose.tracking.verdict`): lost or not, and per-joint confidence.
    Frames with no usable joints and no previous solution, or with neither joints nor
@@ -46,6 +45,7 @@ from swarmpose.gpu.tile import box_around
 from swarmpose.sources.base import Frame
 from swarmpose.tracking import search, verdict
 from swarmpose.tracking.arm_proposals import arm_proposals
+from swarmpose.tracking.body_scene import body_scene
 from swarmpose.tracking.config import MODE_WEIGHTS, TrackerConfig
 from swarmpose.tracking.hidden_lifts import without_hidden_lifts
 from swarmpose.tracking.init_pose import FACINGS_DEG, torso_pose, turned
@@ -225,12 +225,18 @@ class BodyTracker:
         if state == "init":
             seeds = self._initialise(centre, targets, depth, rng, timings)
             centre = seeds[0]
+            box = self.search_box(centre, targets)
             start = search.spread(centre, pso.particles, rng, np.full(3, 0.04), 0.1, 0.15)
         else:
             centre = self.previous
-            if self.config.hidden_lifts and self.config.mode != "depth":  # depth mode: no joint term
+            hidden = self.config.hidden_lifts and self.config.mode != "depth"  # depth mode: no joint term
+            arms = self.config.arm_proposals and self.config.mode != "joints"  # proposals the depth judges
+            t_scene = time.perf_counter()
+            scene = body_scene(self.body, centre) if hidden or arms else None  # one posed body for both
+            timings["scene"] = 1000 * (time.perf_counter() - t_scene)
+            if hidden:
                 t_hidden = time.perf_counter()
-                targets = without_hidden_lifts(self.body, centre, targets, self.intrinsics)
+                targets = without_hidden_lifts(self.body, centre, targets, self.intrinsics, scene)
                 timings["hidden"] = 1000 * (time.perf_counter() - t_hidden)
             recheck = self._recheck(frame.index, lifted, targets, depth, rng, timings)
             torso = torso_pose(self.body, lifted, centre[7:], upright=False)
@@ -240,9 +246,9 @@ class BodyTracker:
             seeds = ([centre] + ([self.challenger] if self.challenger is not None else [])
                      + self.history[-HISTORY:][::-1] + ([torso] if torso is not None else []) + recheck)
             box = self.search_box(centre, targets)
-            if self.config.arm_proposals and self.config.mode != "joints" and len(seeds) < pso.particles:
-                t_arms = time.perf_counter()  # proposals the depth judges, as many as the swarm has room for
-                seeds += arm_proposals(self.body, centre, depth, self.intrinsics, box)[:pso.particles - len(seeds)]
+            if arms and len(seeds) < pso.particles:  # as many as the swarm has room for
+                t_arms = time.perf_counter()
+                seeds += arm_proposals(self.body, centre, depth, self.intrinsics, box, scene)[:len(start) - len(seeds)]
                 timings["arms"] = 1000 * (time.perf_counter() - t_arms)
             room = pso.particles - len(seeds)
             if self.config.limb_flips and room > 0:
@@ -253,8 +259,7 @@ class BodyTracker:
             start[i] = s
 
         t1 = time.perf_counter()
-        self.objective.set_frame(depth, box if state == "tracking" else self.search_box(centre, targets), targets,
-                                 centre)
+        self.objective.set_frame(depth, box, targets, centre)
         self.objective.take_spent()
         result = self._search(self.objective, start, rng, pso)
         timings["pso"] = 1000 * (time.perf_counter() - t1)

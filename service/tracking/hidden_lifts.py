@@ -29,6 +29,7 @@ import numpy as np
 
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
+from swarmpose.tracking.body_scene import body_scene
 from swarmpose.tracking.lift import JOINT_RADIUS
 from swarmpose.tracking.objective import JointTargets
 
@@ -41,9 +42,12 @@ EXPLAINED_M = 0.05
 """The observed surface at a keypoint within this (m) of the model's occluder: the lift measured it."""
 
 
-def hidden_lifts(body: SkinnedBody, pose: np.ndarray, targets: JointTargets, intrinsics: Intrinsics) -> np.ndarray:
+def hidden_lifts(body: SkinnedBody, pose: np.ndarray, targets: JointTargets, intrinsics: Intrinsics,
+                 scene=None) -> np.ndarray:
     """(n,) bool over ``targets``: the lifts that measured the occluder of a joint the previous
-    solution ``pose`` (36,) hides (see the module docstring). Camera frame, m."""
+    solution ``pose`` (36,) hides (see the module docstring). Camera frame, m. scene: the posed
+    body's :func:`~swarmpose.tracking.body_scene.body_scene` when the caller has it (None: built
+    here if a joint is to be tested)."""
     out = np.zeros(targets.count, bool)
     tested = [i for i, name in enumerate(targets.names)
               if name in LIMB_JOINTS and np.all(np.isfinite(targets.xyz[i]))]
@@ -51,9 +55,7 @@ def hidden_lifts(body: SkinnedBody, pose: np.ndarray, targets: JointTargets, int
         return out
     import open3d as o3d
 
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(body.pose(pose[None])[0], np.float32)),
-                        o3d.core.Tensor(np.ascontiguousarray(body.triangles, np.uint32)))
+    scene = body_scene(body, pose) if scene is None else scene
     names = [targets.names[i] for i in tested]
     joints = body.posed_points(pose[None], names)[0]  # (k, 3)
     joint_range = np.linalg.norm(joints, axis=1)
@@ -74,9 +76,9 @@ def hidden_lifts(body: SkinnedBody, pose: np.ndarray, targets: JointTargets, int
 
 
 def without_hidden_lifts(body: SkinnedBody, pose: np.ndarray, targets: JointTargets,
-                         intrinsics: Intrinsics) -> JointTargets:
+                         intrinsics: Intrinsics, scene=None) -> JointTargets:
     """``targets`` with the lifts :func:`hidden_lifts` finds set to NaN (out of the 3D term)."""
-    hidden = hidden_lifts(body, pose, targets, intrinsics)
+    hidden = hidden_lifts(body, pose, targets, intrinsics, scene)
     if not hidden.any():
         return targets
     xyz = targets.xyz.copy()
