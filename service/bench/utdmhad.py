@@ -22,7 +22,14 @@ the median over the subject's sequences of the height measured on their first fr
 depth, :func:`~swarmpose.sources.utdmhad.measured_height`; a median, because a few actions
 begin seated).
 
-Each (sequence, variant) is one JSON record in ``OUT/results/`` with the per-frame
+With ``seeds`` > 1 every (sequence, variant) is tracked once per PSO seed (0, 1, ...; seed 0's
+files keep their names, seed s's end in ``-seed{s}``, and its record and settings carry
+``seed``): the matrix's mean moved by about ±2.5 mm with the pair of seeds and a change of the
+search moves single sequences by 10 mm (BENCHMARKS.md, issue 12, eleventh part). The table and
+summary average over every record of a variant; the per-joint offsets of a subject are learnt
+on the other subjects' records of all seeds.
+
+Each (sequence, variant, seed) is one JSON record in ``OUT/results/`` with the per-frame
 estimates in a ``.npz`` beside it, both written whole or not at all: an interrupted run
 resumes. A record is reused when its frames, tracker settings and skeleton lag match (a
 record without ``lag_frames`` was scored against the files' own pairing, lag 0); after a
@@ -137,9 +144,10 @@ def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[s
                 shapes: tuple[str, ...] = ("default",), frames: int = 0, tracker: dict | None = None,
                 subjects: tuple[str, ...] = SUBJECTS, actions: tuple[int, ...] = (),
                 assets: str | Path | None = None, lag_frames: float = DEPTH_LAG_FRAMES,
-                progress: bool = True) -> list[dict]:
-    """Every (sequence, variant) record, computed or read back from ``out/results``, with
-    ``mpjpe_offset_mm`` filled in (see the module doc); the skeleton ``lag_frames`` behind the depth."""
+                progress: bool = True, seeds: int = 1) -> list[dict]:
+    """Every (sequence, variant, seed) record, computed or read back from ``out/results``, with
+    ``mpjpe_offset_mm`` filled in (see the module doc); the skeleton ``lag_frames`` behind the
+    depth; ``seeds`` PSO seeds per sequence and variant, 0 .. seeds - 1."""
     for name, given, allowed in (("mode", modes, MODES), ("detector", detectors, tuple(DETECTORS)),
                                  ("shape", shapes, SHAPES)):
         bad = [g for g in given if g not in allowed]
@@ -147,18 +155,22 @@ def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[s
             raise ConfigError(f"unknown {name} {bad[0]!r}; choose from {', '.join(allowed)}")
     if frames < 0:
         raise ConfigError(f"--frames must be 0 (all) or more, got {frames}")
+    if seeds < 1:
+        raise ConfigError(f"--seeds must be at least 1, got {seeds}")
     lag_frames = check_lag(lag_frames, "--lag")
     root = find_assets(assets).resolve()
     tracker = tracker_settings(tracker)
     results = Path(out) / "results"
     results.mkdir(parents=True, exist_ok=True)
-    todo = [(path, m, d, s) for path in sequences(root, subjects, actions)
+    todo = [(path, m, d, s, seed) for seed in range(seeds) for path in sequences(root, subjects, actions)
             for m in modes for d in detectors for s in shapes]
     records, arrays = [], []
     with progress_bar("bench utdmhad", len(todo), enabled=progress, unit="sequence") as bar:
-        for path, mode, detector, shape in todo:
-            stem = f"{path.name.removesuffix('_depth.mat')}-{variant_name(mode, detector, shape)}"
+        for path, mode, detector, shape, seed in todo:
+            stem = (f"{path.name.removesuffix('_depth.mat')}-{variant_name(mode, detector, shape)}"
+                    + (f"-seed{seed}" if seed else ""))
             settings = variant_settings(tracker, mode, shape)
+            settings = {**settings, "seed": seed} if seed else settings  # seed 0: the records made before seeds
             stored = _read(results / stem, frames, settings, lag_frames)
             if stored is None:
                 record, estimates, truth = track_sequence(path, mode, detector, shape, root, settings, frames,
@@ -235,7 +247,8 @@ def format_table(records: list[dict]) -> str:
 
 
 def summary(records: list[dict]) -> dict[str, dict[str, float | None]]:
-    """Per variant: mean Δ, mean offset-corrected Δ, sequences, frames, lost frames, detector px."""
+    """Per variant: mean Δ and mean offset-corrected Δ over its records (every seed), sequences,
+    seeds, frames and lost frames (summed over the seeds), detector px."""
     out = {}
     for v in sorted({(r["mode"], r["detector"], r["shape"]) for r in records}):
         rows = [r for r in records if (r["mode"], r["detector"], r["shape"]) == v]
@@ -245,7 +258,9 @@ def summary(records: list[dict]) -> dict[str, dict[str, float | None]]:
             return float(np.mean(values)) if values else None
 
         out[variant_name(*v)] = {"mpjpe_mm": mean("mpjpe_mm"), "mpjpe_offset_mm": mean("mpjpe_offset_mm"),
-                                 "sequences": len(rows), "frames": int(sum(r["frames"] for r in rows)),
+                                 "sequences": len({r["sequence"] for r in rows}),
+                                 "seeds": len({r.get("seed", 0) for r in rows}),
+                                 "frames": int(sum(r["frames"] for r in rows)),
                                  "lost": int(sum(r["lost"] for r in rows)), "detector_px": mean("detector_px")}
     return out
 

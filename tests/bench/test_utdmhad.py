@@ -92,3 +92,30 @@ def test_eval_refuses_a_mat_file_that_is_not_utdmhad(tmp_path, capsys):
     bad.write_bytes(b"\x00" * 200)
     assert main(["eval", str(bad), "--quiet"]) == 2
     assert "a1_s1_t1_depth.mat" in capsys.readouterr().err
+
+
+@needs_assets
+def test_seeds_track_each_sequence_again_and_resume(tmp_path):
+    """Two seeds: seed 0's files keep their names, seed 1's carry ``-seed1`` and the seed; the two
+    runs differ (the PSO draws otherwise); the summary averages every record of the variant and a
+    second call reads them all back."""
+    from swarmpose.bench.utdmhad import summary
+
+    kwargs = dict(modes=("hybrid",), detectors=("simulated",), frames=4, tracker={"particles": 8, "generations": 4},
+                  subjects=("s1", "s2"), actions=(23,), progress=False, seeds=2)
+    records = run_utdmhad(tmp_path, **kwargs)
+    names = sorted(p.name for p in (tmp_path / "results").glob("*.json"))
+    assert names == ["a23_s1_t1-hybrid-simulated-default-seed1.json", "a23_s1_t1-hybrid-simulated-default.json",
+                     "a23_s2_t1-hybrid-simulated-default-seed1.json", "a23_s2_t1-hybrid-simulated-default.json"]
+    by_seed = {(r["sequence"], r.get("seed", 0)): r for r in records}
+    assert by_seed[("a23_s1_t1", 1)]["seed"] == 1 and "seed" not in by_seed[("a23_s1_t1", 0)]
+    assert by_seed[("a23_s1_t1", 0)]["mpjpe_mm"] != by_seed[("a23_s1_t1", 1)]["mpjpe_mm"]
+    overall = summary(records)["hybrid-simulated-default"]
+    assert overall["sequences"] == 2 and overall["seeds"] == 2
+    assert overall["mpjpe_mm"] == pytest.approx(np.mean([r["mpjpe_mm"] for r in records]))
+    stamps = [p.stat().st_mtime_ns for p in sorted((tmp_path / "results").glob("*.json"))]
+    again = run_utdmhad(tmp_path, **kwargs)
+    assert [p.stat().st_mtime_ns for p in sorted((tmp_path / "results").glob("*.json"))] == stamps
+    assert [r["mpjpe_mm"] for r in again] == [r["mpjpe_mm"] for r in records]
+    with pytest.raises(ConfigError, match="--seeds"):
+        run_utdmhad(tmp_path, **{**kwargs, "seeds": 0})
