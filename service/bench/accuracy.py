@@ -35,7 +35,7 @@ import numpy as np
 
 from swarmpose.bench.detect import find_assets
 from swarmpose.bench.matrix import DETECTORS, MODES, MOTIONS, Cell, Sequence, cells
-from swarmpose.bench.store import mode_settings, read_record, tracker_settings, write_record
+from swarmpose.bench.store import mode_settings, read_record, seeded, tracker_settings, write_record
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import EVAL_JOINTS, POSE_DIM
 from swarmpose.core.camera import Intrinsics
@@ -189,9 +189,8 @@ def run_matrix(out: Path, *, subset: str = "full", detectors: tuple[str, ...] | 
     records = []
     with progress_bar("bench accuracy", len(todo), enabled=progress, unit="run") as bar:
         for cell, mode, seed in todo:
-            settings = mode_settings(tracker, mode)
-            settings = {**settings, "seed": seed} if seed else settings  # seed 0: the records made before seeds
-            path = out / "results" / (f"{cell.name}-{mode}" + (f"-seed{seed}" if seed else "") + ".json")
+            settings, suffix = seeded(mode_settings(tracker, mode), seed)
+            path = out / "results" / f"{cell.name}-{mode}{suffix}.json"
             record = read_record(path, {"frames": frames, **settings})
             if record is None:
                 folder = make_sequence(cell.sequence, out / "sequences" / cell.sequence.name, frames, root)

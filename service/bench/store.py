@@ -32,6 +32,12 @@ def mode_settings(tracker: dict, mode: str) -> dict:
     return {**tracker, "arm_proposals": bool(tracker.get("arm_proposals", True)) and mode not in ("joints", "lift")}
 
 
+def seeded(settings: dict, seed: int) -> tuple[dict, str]:
+    """A run's settings and file-name suffix for PSO seed ``seed``: seed 0 is the records made before
+    seeds (no ``seed`` setting, no suffix), seed s adds ``seed`` to the settings and ``-seed{s}``."""
+    return ({**settings, "seed": seed}, f"-seed{seed}") if seed else (settings, "")
+
+
 def read_record(path: Path, expected: dict) -> dict | None:
     """The JSON record at ``path`` if each key of ``expected`` holds the same value in it (a
     tracker setting it lacks: :data:`BEFORE_THE_SETTING`'s value); None when it is absent,

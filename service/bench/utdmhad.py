@@ -56,7 +56,7 @@ import numpy as np
 from swarmpose.bench.accuracy import scores, track_with_truth
 from swarmpose.bench.detect import find_assets
 from swarmpose.bench.matrix import DETECTORS, MODES
-from swarmpose.bench.store import mode_settings, read_record, tracker_settings, write_record
+from swarmpose.bench.store import mode_settings, read_record, seeded, tracker_settings, write_record
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.progress import progress_bar
 from swarmpose.pipeline.config import ServiceConfig
@@ -167,10 +167,8 @@ def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[s
     records, arrays = [], []
     with progress_bar("bench utdmhad", len(todo), enabled=progress, unit="sequence") as bar:
         for path, mode, detector, shape, seed in todo:
-            stem = (f"{path.name.removesuffix('_depth.mat')}-{variant_name(mode, detector, shape)}"
-                    + (f"-seed{seed}" if seed else ""))
-            settings = variant_settings(tracker, mode, shape)
-            settings = {**settings, "seed": seed} if seed else settings  # seed 0: the records made before seeds
+            settings, suffix = seeded(variant_settings(tracker, mode, shape), seed)
+            stem = f"{path.name.removesuffix('_depth.mat')}-{variant_name(mode, detector, shape)}{suffix}"
             stored = _read(results / stem, frames, settings, lag_frames)
             if stored is None:
                 record, estimates, truth = track_sequence(path, mode, detector, shape, root, settings, frames,

@@ -38,11 +38,10 @@ import numpy as np
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.tracking.body_scene import body_scene
-from swarmpose.tracking.limb_flips import MAX_MISS_M, limb_columns, solve_limbs
+from swarmpose.tracking.limb_flips import FLIP_LIMBS, MAX_MISS_M, limb_columns, solve_limbs
 
-REACH_ARMS: tuple[tuple[str, str, str], ...] = (("left_shoulder", "left_elbow", "left_wrist"),
-                                                ("right_shoulder", "right_elbow", "right_wrist"))
-"""Per arm: (pivot, middle, end) points, as :data:`~swarmpose.tracking.limb_flips.FLIP_LIMBS`."""
+REACH_ARMS: tuple[tuple[str, str, str], ...] = tuple(limb for limb in FLIP_LIMBS if limb[0].endswith("_shoulder"))
+"""Per arm, left first: the (pivot, middle, end) points of :data:`~swarmpose.tracking.limb_flips.FLIP_LIMBS`'s arms."""
 EXPLAINED_M = 0.10
 """An observed point this close to the posed (decimated) body's surface is explained by it: the
 depth noise is 1-3 cm at 3 m, the decimated mesh cuts corners by a few cm, and the limbs move

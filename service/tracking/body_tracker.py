@@ -246,11 +246,12 @@ class BodyTracker:
             seeds = ([centre] + ([self.challenger] if self.challenger is not None else [])
                      + self.history[-HISTORY:][::-1] + ([torso] if torso is not None else []) + recheck)
             box = self.search_box(centre, targets)
-            if arms and len(seeds) < pso.particles:  # as many as the swarm has room for
-                t_arms = time.perf_counter()
-                seeds += arm_proposals(self.body, centre, depth, self.intrinsics, box, scene)[:len(start) - len(seeds)]
-                timings["arms"] = 1000 * (time.perf_counter() - t_arms)
             room = pso.particles - len(seeds)
+            if arms and room > 0:  # as many as the swarm has room for
+                t_arms = time.perf_counter()
+                seeds += arm_proposals(self.body, centre, depth, self.intrinsics, box, scene)[:room]
+                timings["arms"] = 1000 * (time.perf_counter() - t_arms)
+                room = pso.particles - len(seeds)
             if self.config.limb_flips and room > 0:
                 t_flips = time.perf_counter()
                 seeds += limb_flips(self.body, centre, most=room)
