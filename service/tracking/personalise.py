@@ -8,16 +8,14 @@ shape space's start body). :func:`fit_shape` chooses ``keyframes`` well-spread f
 1. **Shape step.** A PSO over the space's parameters (:class:`~swarmpose.body.shape_space.ShapeSpace`)
    with the poses held, minimising the mean over the key frames of ``E + w_D·E_S`` (the
    tracker's objective E with its own weights, penetration term included, plus the silhouette
-   term E_S below), plus
-   ``w_B·E_B``, the bone-length term below. Each frame's root may move by one of
-   :data:`ROOT_OFFSETS_M` per candidate (a taller body moves its hips). Each candidate shape is
-   a buffer upload into one scorer per key frame (same topology), each scorer keeping its
-   frame's observation for the whole fit.
+   term E_S below), plus ``w_B·E_B``, the bone-length term below. Each frame's root may move by
+   one of :data:`ROOT_OFFSETS_M` per candidate (a taller body moves its hips). Each candidate
+   shape is a buffer upload into one scorer per key frame (same topology), each scorer keeping
+   its frame's observation for the whole fit.
 2. **Pose step.** Every key frame's pose is refitted with the new shape by the tracker's own
    per-frame search (``pose_steps`` times), started from the frame's last pose, without the
-   depth flips of the limbs (:mod:`~swarmpose.tracking.limb_flips`): a local refinement.
-
-Steps 1 and 2 alternate for ``rounds`` rounds.
+   depth flips of the limbs (:mod:`~swarmpose.tracking.limb_flips`): a local refinement. Steps 1
+   and 2 alternate for ``rounds`` rounds.
 
 E_S, the silhouette term: the depth term ignores pixels without an observation, which on depth
 whose background is removed (UTD-MHAD, a segmented person) lets a body grow for free. E_S
@@ -42,6 +40,9 @@ is each sweep candidate's own (its genders are far apart, and the bias flips sig
 and female bodies), then in each round the current shape's, used for every candidate of that
 round's shape PSO (calibrating each of its 272 candidates would cost 1.5-2 s apiece). The
 energies of different rounds are therefore measured against different E_B targets.
+E_J's 3D term stays in the fit though the build biases it (a heavier body's joints lift farther in
+front: :data:`~swarmpose.tracking.lift.JOINT_RADIUS` is one per joint); the term left out, or its
+targets corrected like E_B's, measured no better (BENCHMARKS.md, personalisation fourth part).
 
 The bodies scored are :meth:`~swarmpose.body.shape_space.ShapeSpace.fitting_body`: for MakeHuman,
 the tracking mesh moved out to enclose the full mesh's volume, which the decimation lowers by

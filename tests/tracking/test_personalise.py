@@ -219,6 +219,33 @@ def test_lift_bias_on_the_model_is_the_lifts_own_lengthening_on_the_observed_fra
 
 
 @needs_assets
+def test_the_lifted_joints_lie_farther_in_front_of_a_heavier_bodys_joints():
+    """The bias the fit's E_J 3D term carries (personalise's docstring): the lift pushes every
+    keypoint's surface depth back by one radius per joint whatever the body, so its error depends
+    on the build. Oracle: each body's own joints against their lift on its ray-cast render (the
+    same pose, facing the camera at 3 m, no noise). The heavy body's hips and shoulders lift at
+    least 1 cm farther in front of their joints than the slim body's."""
+    from swarmpose.body.loader import load_body
+    from swarmpose.core.camera import Intrinsics
+    from swarmpose.tracking.lift import lift_keypoints, median_depth
+    from swarmpose.tracking.personalise import model_depth
+
+    k = Intrinsics(width=320, height=240, fx=285.0, fy=285.0, cx=159.5, cy=119.5)
+    names = ("left_hip", "right_hip", "left_shoulder", "right_shoulder")
+    error = {}
+    for shape in ("female-slim", "female-heavy"):
+        body = load_body(f"makehuman:{MAKEHUMAN}", shape)
+        pose = body.rest_pose(translation=(0.0, 0.0, 3.0), quaternion=(0.0, 1.0, 0.0, 0.0))
+        depth = model_depth(body, pose, k)
+        joints = body.posed_points(pose[None], names)[0]
+        lifted = lift_keypoints(depth, k, {n: (float(u), float(v), 1.0) for n, (u, v) in zip(names, k.project(joints))},
+                                typical_depth=median_depth(depth))
+        error[shape] = np.array([lifted[n][2] - p[2] for n, p in zip(names, joints)])  # m, < 0: in front
+    assert np.all(np.isfinite(error["female-heavy"])) and np.all(np.isfinite(error["female-slim"]))
+    assert np.all(error["female-heavy"] - error["female-slim"] < -0.01), error
+
+
+@needs_assets
 def test_personalize_recovers_a_tall_subjects_height_and_writes_a_body_that_loads(tall_walk, tmp_path, capsys):
     """The start body is 1.68 m; the subject 1.93 m. On this test's small budget (16 frames,
     tracking and pose refits at p = g = 24, 2 rounds) the fit must land within 4 cm of the true
