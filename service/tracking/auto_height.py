@@ -10,12 +10,13 @@ and the next name: :func:`person_stature`). At a tracked frame where the person 
 at least one leg, by the fitted pose (:func:`upright`) and by the lifted joints J^e
 (:func:`lifted_upright`), the stature is the height of the top of the head above the floor, along
 the floor's normal, where a floor is seen under the feet (:func:`floor_plane`), else above the
-lowest points of the feet, along the fitted torso's up axis; divided by :data:`UPRIGHT_SHARE` (less
-:data:`HIDDEN_SOLE_SHARE` without a floor). The head is the person's points above the fitted neck
-near the line along the axis through the fitted head, less those near a fitted forearm and hand (a
-hand raised over the head is not its top); the feet are the points below the fitted knees near the
-lines through the ankles. The fitted model only says where to look: its size does not enter the
-measure. A hand on the head, or a head or feet cut off by the image's border, give no measure.
+lowest points of the feet, along the fitted body's long axis (neck to mid-ankles); divided by
+:data:`UPRIGHT_SHARE` (less :data:`HIDDEN_SOLE_SHARE` without a floor). The head is the person's
+points above the fitted neck near the line along the axis through the fitted head, less those near
+a fitted forearm and hand (a hand raised over the head is not its top); the feet are the points
+below the fitted knees near the lines through the ankles. The fitted model only says where to look:
+its size does not enter the measure. A hand on the head, or a head or feet cut off by the image's
+border, give no measure.
 
 *Design change:* the first version compared the person's extent with the fitted model's own
 render, measured the same way, so that the percentiles and the posture would cancel. They do
