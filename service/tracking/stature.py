@@ -269,7 +269,8 @@ def person_stature(body: SkinnedBody, pose: np.ndarray, depth: np.ndarray, intri
     seen = replace(intrinsics, width=window.tw, height=window.th, cx=intrinsics.cx - u0,
                    cy=intrinsics.cy - v0).point_map(depth)  # the window as a camera of its own
     floor = floor_plane(seen, up, mask, hit, facing_along(seen, up))
-    axis = long_axis(marks, up) if floor is None else floor[0]
+    standing = long_axis(marks, up)  # the axis wherever no floor stands under the feet
+    axis = standing if floor is None else floor[0]
     rows = np.nonzero(mask)[0] + v0
     person = seen[mask]
     along = person @ axis
@@ -290,6 +291,6 @@ def person_stature(body: SkinnedBody, pose: np.ndarray, depth: np.ndarray, intri
     top, soles = ends(along)
     if floor is not None and -FLOOR_BELOW_FEET_M[0] <= soles - floor[1] <= FLOOR_BELOW_FEET_M[1]:
         return (top - floor[1]) / UPRIGHT_SHARE
-    if floor is not None:  # a plane, but not the one the feet stand on (a step, a table): along the torso
-        top, soles = ends(person @ up)
+    if floor is not None:  # a plane, but not the one the feet stand on (a step, a table)
+        top, soles = ends(person @ standing)
     return (top - soles) / (UPRIGHT_SHARE - HIDDEN_SOLE_SHARE)
