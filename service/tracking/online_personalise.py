@@ -4,7 +4,10 @@
 it tracked (depth and detection; colour is dropped), then fits the shape on them
 (:func:`~swarmpose.tracking.personalise.fit_shape`, in the tracking thread: that frame takes
 the fit's seconds), takes the new body and locks it for the rest of the run. Each person of a
-several-people run has a tracker of their own, so each is personalised on their own frames.
+several-people run has a tracker of their own, so each is personalised on their own frames, and
+only on frames where no one else hides them (:data:`MAX_HIDDEN_SHARE`): a person partly behind
+another was fitted to what was left of them (the 3-person crossing's waver, 2 m behind two
+walkers, came out a slim, mostly female body instead of the heavy male he is).
 A fit that fails (too few frames tracked) leaves the start body and says why.
 """
 
@@ -25,6 +28,11 @@ from swarmpose.tracking.personalise import FitSettings, ShapeSample, body_measur
 from swarmpose.tracking.result import BodyResult
 
 log = logging.getLogger(__name__)
+
+MAX_HIDDEN_SHARE = 0.2
+"""With other people in view, a frame is collected only while at most this share of the model's
+rendered pixels lacks an observation: a person partly behind another (whose depth was removed)
+would be fitted to what is left of them."""
 
 
 class PersonalisingTracker(BodyTracker):
@@ -55,11 +63,20 @@ class PersonalisingTracker(BodyTracker):
     def step(self, frame: Frame, joints: Joints2D | None, others_removed: bool = False) -> BodyResult:
         result = super().step(frame, joints, others_removed)
         found = result.found
-        if self.state == "collecting" and found.state != "lost" and found.pose is not None:
+        if (self.state == "collecting" and found.state != "lost" and found.pose is not None
+                and not (others_removed and self._hidden_share(found.pose) > MAX_HIDDEN_SHARE)):
             self.samples.append(ShapeSample(replace(frame, color=None), joints, found.pose))
             if len(self.samples) >= self.needed:
                 self._personalise()
         return result
+
+    def _hidden_share(self, pose) -> float:
+        """The share of the model's rendered pixels at ``pose`` (36,) that have no observed depth
+        in this frame (the depth the tracker was last given)."""
+        _, counts = self._render(pose)
+        if counts is None or not int(counts["rendered"][0]):
+            return 1.0
+        return 1.0 - int(counts["both"][0]) / int(counts["rendered"][0])
 
     def _personalise(self) -> None:
         log.info("body %d: personalising from %d frames", self.body_id, len(self.samples))

@@ -432,3 +432,52 @@ def test_a_failed_fit_is_reported_valid_and_a_new_person_starts_again_from_the_s
     assert tracker.personalisation() == {"id": 4, "state": "collecting", "frames": 0, "needed": 3}
     np.testing.assert_allclose(tracker.body.vertices, space.tracking_body(space.start).vertices)
     np.testing.assert_allclose(tracker.objective.scorer.body.vertices, tracker.body.vertices)
+
+
+@needs_assets
+def test_with_other_people_in_view_a_frame_whose_person_is_half_hidden_is_not_collected(tall_walk):
+    """Oracle: the walk's own depth with the person's pixels below the hips removed (as another
+    person's pixels are in a several-people run). The hidden share the tracker measures is the
+    share of the person's pixels removed, counted on the depth by hand (within 0.1); such a frame
+    is not collected while other people are in view, the whole frame is, and with one person in
+    view (no depth removed for others) the check does not run."""
+    from dataclasses import replace
+
+    from swarmpose.body.shape_space import MakeHumanSpace
+    from swarmpose.detect.registry import make_detector
+    from swarmpose.sources.registry import open_source
+    from swarmpose.tracking.config import TrackerConfig
+    from swarmpose.tracking.online_personalise import MAX_HIDDEN_SHARE, PersonalisingTracker
+
+    source = open_source(str(tall_walk))
+    frames = list(source)
+    detector = make_detector("simulated", source)
+    joints = [detector.detect(f) for f in frames[:3]]
+    source.close()
+    truth = [json.loads(line) for line in (tall_walk / "groundtruth.jsonl").read_text().splitlines()]
+    tracker = PersonalisingTracker(MakeHumanSpace(MAKEHUMAN), 100, frames[0].intrinsics,
+                                   TrackerConfig(personalize=100, particles=16, generations=16, max_people=1))
+    tracker.step(frames[0], joints[0], others_removed=True)
+    assert len(tracker.samples) == 1  # the whole person in view
+
+    frame, t = frames[1], truth[1]
+    xy = np.array([p for p in t["joints2d"].values() if p is not None])
+    hips_row = int(round(np.mean([t["joints2d"]["left_hip"][1], t["joints2d"]["right_hip"][1]])))
+    u0, u1 = int(xy[:, 0].min()) - 40, int(xy[:, 0].max()) + 40
+    v0, v1 = int(xy[:, 1].min()) - 30, int(xy[:, 1].max()) + 15
+    depth = np.nan_to_num(np.asarray(frame.depth, float))
+    centre = np.median(depth[hips_row - 20:hips_row + 20, int(xy[:, 0].mean()) - 5:int(xy[:, 0].mean()) + 5])
+    person = np.zeros(depth.shape, bool)
+    person[v0:v1, u0:u1] = np.abs(depth[v0:v1, u0:u1] - centre) < 0.5
+    removed = person.copy()
+    removed[:hips_row] = False
+    expected = removed.sum() / person.sum()
+    half = replace(frame, depth=np.where(removed, 0.0, depth).astype(np.float32))
+    tracker.step(half, joints[1], others_removed=True)
+    share = tracker._hidden_share(tracker.previous)
+    assert abs(share - expected) < 0.1, (share, expected)
+    assert share > MAX_HIDDEN_SHARE and len(tracker.samples) == 1
+    tracker.step(half, joints[1], others_removed=False)  # one person in view: no check
+    assert len(tracker.samples) == 2
+    tracker.step(frames[2], joints[2], others_removed=True)
+    assert tracker._hidden_share(tracker.previous) < MAX_HIDDEN_SHARE and len(tracker.samples) == 3
