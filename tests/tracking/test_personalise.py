@@ -440,7 +440,7 @@ def test_with_other_people_in_view_a_frame_whose_person_is_half_hidden_is_not_co
     person's pixels are in a several-people run). The hidden share the tracker measures is the
     share of the person's pixels removed, counted on the depth by hand (within 0.1); such a frame
     is not collected while other people are in view, the whole frame is, and with one person in
-    view (no depth removed for others) the check does not run."""
+    view (no depth removed for others), or when the tracker scores no depth, the check does not run."""
     from dataclasses import replace
 
     from swarmpose.body.shape_space import MakeHumanSpace
@@ -481,3 +481,7 @@ def test_with_other_people_in_view_a_frame_whose_person_is_half_hidden_is_not_co
     assert len(tracker.samples) == 2
     tracker.step(frames[2], joints[2], others_removed=True)
     assert tracker._hidden_share(tracker.previous) < MAX_HIDDEN_SHARE and len(tracker.samples) == 3
+    joints_only = PersonalisingTracker(MakeHumanSpace(MAKEHUMAN), 100, frames[0].intrinsics,
+                                       TrackerConfig(mode="joints", personalize=100, particles=16, generations=16))
+    joints_only.step(half, joints[1], others_removed=True)  # scores no depth: nothing to judge hiding by
+    assert len(joints_only.samples) == 1
