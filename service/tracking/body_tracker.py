@@ -130,6 +130,7 @@ class BodyTracker:
         """Frames tracked since the track's start (0 on the start's frame)."""
         self.challenger: np.ndarray | None = None
         """Last frame's winning solution turned away from the track (see :data:`REPLACED_TURN_DEG`)."""
+        self.best_counts: dict[str, np.ndarray] | None = None  # the last frame's, see _render
         self.filter = (PoseFilter(config.smoothing_cutoff_hz, config.smoothing_beta)
                        if config.smoothing == "one-euro" else None)
         """The published poses' filter (``--smoothing one-euro``); the search never sees its output."""
@@ -367,8 +368,7 @@ class BodyTracker:
         particles = max(self.config.particles, self.config.start_budget) if first else self.config.particles
         # joints only (no depth): the joint stage is the whole fit, at twice the generations
         pso = replace(self.config.pso_config, variant="perturbed",
-                      generations=budget * (1 if joint_objective is not None else 2),
-                      particles=particles)
+                      generations=budget * (1 if joint_objective is not None else 2), particles=particles)
         fits = []
         for degrees in FACINGS_DEG:
             facing = turned(self.body, centre, degrees)
@@ -411,10 +411,10 @@ class BodyTracker:
             objective.coarse_active = False
 
     def _render(self, best: np.ndarray) -> tuple[np.ndarray | None, dict[str, np.ndarray] | None]:
-        """The best pose's depth tile (TH, TW) m and its counts, once per frame; (None, None)
-        when the frame's box holds no observed depth."""
-        observed = self.objective.scorer.observed
+        """The best pose's depth tile (TH, TW) m and its counts, once per frame, the counts kept as
+        ``best_counts``; (None, None) when the frame's box holds no observed depth."""
+        observed, self.best_counts = self.objective.scorer.observed, None
         if observed is None or not np.any(observed > 0):
             return None, None
-        tiles, _, counts = self.objective.scorer.render_and_score(best[None])
-        return tiles[0], counts
+        tiles, _, self.best_counts = self.objective.scorer.render_and_score(best[None])
+        return tiles[0], self.best_counts

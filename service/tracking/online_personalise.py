@@ -16,8 +16,6 @@ from __future__ import annotations
 import logging
 from dataclasses import replace
 
-import numpy as np
-
 from swarmpose.body.shape_space import ShapeSpace
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import SwarmposeError
@@ -66,18 +64,17 @@ class PersonalisingTracker(BodyTracker):
         result = super().step(frame, joints, others_removed)
         found = result.found
         if (self.state == "collecting" and found.state != "lost" and found.pose is not None
-                and not (others_removed and self.weights.depth > 0
-                         and self._hidden_share(found.pose) > MAX_HIDDEN_SHARE)):
+                and not (others_removed and self.weights.depth > 0 and self.hidden_share() > MAX_HIDDEN_SHARE)):
             self.samples.append(ShapeSample(replace(frame, color=None), joints, found.pose))
             if len(self.samples) >= self.needed:
                 self._personalise()
         return result
 
-    def _hidden_share(self, pose: np.ndarray) -> float:
-        """The share of the model's rendered pixels at ``pose`` (36,) that have no observed depth
-        in this frame (the depth the tracker was last given); 1 where its box holds no depth.
-        Asked only of a tracker that scores depth (not ``--mode joints``)."""
-        _, counts = self._render(pose)
+    def hidden_share(self) -> float:
+        """The share of the model's rendered pixels at the last frame's solution that have no
+        observed depth in that frame (from the counts the step's verdict used); 1 where its box
+        held no depth. Asked only of a tracker that scores depth (not ``--mode joints``)."""
+        counts = self.best_counts
         if counts is None or not int(counts["rendered"][0]):
             return 1.0
         return 1.0 - int(counts["both"][0]) / int(counts["rendered"][0])

@@ -474,13 +474,13 @@ def test_with_other_people_in_view_a_frame_whose_person_is_half_hidden_is_not_co
     expected = removed.sum() / person.sum()
     half = replace(frame, depth=np.where(removed, 0.0, depth).astype(np.float32))
     tracker.step(half, joints[1], others_removed=True)
-    share = tracker._hidden_share(tracker.previous)
+    share = tracker.hidden_share()
     assert abs(share - expected) < 0.1, (share, expected)
     assert share > MAX_HIDDEN_SHARE and len(tracker.samples) == 1
     tracker.step(half, joints[1], others_removed=False)  # one person in view: no check
     assert len(tracker.samples) == 2
     tracker.step(frames[2], joints[2], others_removed=True)
-    assert tracker._hidden_share(tracker.previous) < MAX_HIDDEN_SHARE and len(tracker.samples) == 3
+    assert tracker.hidden_share() < MAX_HIDDEN_SHARE and len(tracker.samples) == 3
     joints_only = PersonalisingTracker(MakeHumanSpace(MAKEHUMAN), 100, frames[0].intrinsics,
                                        TrackerConfig(mode="joints", personalize=100, particles=16, generations=16))
     joints_only.step(half, joints[1], others_removed=True)  # scores no depth: nothing to judge hiding by
