@@ -69,7 +69,7 @@ def cmd_bench_accuracy(args: argparse.Namespace) -> int:
     """The tracker over the benchmark matrix: per cell and mode Δ, A(100), lost frames, facing."""
     tracker = {"particles": args.particles, "generations": args.generations, "max_people": args.max_people,
                "arm_prior": args.arm_prior, "limb_flips": args.limb_flips, "hidden_lifts": args.hidden_lifts,
-               "arm_proposals": args.arm_proposals}
+               "arm_proposals": args.arm_proposals, "hypotheses": args.hypotheses}
     records = run_matrix(Path(args.out), subset=args.subset, detectors=args.detectors, modes=args.modes,
                          frames=args.frames, tracker=tracker, assets=args.assets, progress=not quiet(args),
                          seeds=args.seeds)
@@ -90,7 +90,7 @@ def cmd_bench_utdmhad(args: argparse.Namespace) -> int:
     """The tracker on UTD-MHAD's real Kinect sequences against the Kinect skeleton."""
     tracker = {"particles": args.particles, "generations": args.generations, "arm_prior": args.arm_prior,
                "limb_flips": args.limb_flips, "hidden_lifts": args.hidden_lifts, "auto_height": args.auto_height,
-               "arm_proposals": args.arm_proposals}
+               "arm_proposals": args.arm_proposals, "hypotheses": args.hypotheses}
     records = run_utdmhad(Path(args.out), modes=args.modes, detectors=args.detectors, shapes=args.shapes,
                           frames=args.frames, tracker=tracker, subjects=args.subjects,
                           actions=tuple(int(a) for a in args.actions), assets=args.assets,
@@ -128,7 +128,7 @@ def _add_assets(p: argparse.ArgumentParser) -> None:
 
 
 def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
-    """--arm-prior, --limb-flips, --hidden-lifts and --arm-proposals of the resumable tracking
+    """--arm-prior, --limb-flips, --hidden-lifts, --arm-proposals and --hypotheses of the resumable tracking
     benchmarks (a record keeps them, so a resume with other values tracks again)."""
     p.add_argument("--arm-prior", type=non_negative_float, default=0.0,
                    help="the tracker's w_A (cost per rad² of the arms away from rest, times how side on the "
@@ -141,6 +141,9 @@ def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
     p.add_argument("--arm-proposals", action=argparse.BooleanOptionalAction, default=True,
                    help="arms sent to unexplained depth within reach and to the other arm's mirror image as "
                         "particles (on: the tracker's default)")
+    p.add_argument("--hypotheses", type=int, choices=range(5), default=2, metavar="N",
+                   help="the best N limb flips and arm proposals each refined by a sub-swarm before they compete "
+                        "(0-4; 2: the tracker's default; 0: single particles, as before)")
 
 
 def _add_budget_and_assets(p: argparse.ArgumentParser) -> None:

@@ -11,7 +11,9 @@ Per frame (:meth:`BodyTracker.step`):
    the J^e torso pose are injected as particles, and so are the previous solution's limbs
    mirrored along the line of sight (:mod:`swarmpose.tracking.limb_flips`, ``limb_flips``),
    and its arms sent to depth within reach that its body does not explain and to each other's
-   mirror image (:mod:`swarmpose.tracking.arm_proposals`, ``arm_proposals``); every
+   mirror image (:mod:`swarmpose.tracking.arm_proposals`, ``arm_proposals``), the best
+   ``hypotheses`` of these flips and proposals each with a sub-swarm that refines it apart from
+   the track for most of the generations (:mod:`swarmpose.tracking.hypotheses`); every
    ``recheck`` frames the start's facings, refitted from the detection, compete as particles
    too. Without one (the first frame, or after the track was lost: state *init*), the torso
    pose of J^e (:func:`swarmpose.tracking.init_pose.torso_pose`) with the body's rest angles,
@@ -48,10 +50,11 @@ from swarmpose.tracking.arm_proposals import arm_proposals
 from swarmpose.tracking.body_scene import body_scene
 from swarmpose.tracking.config import MODE_WEIGHTS, TrackerConfig
 from swarmpose.tracking.hidden_lifts import without_hidden_lifts
+from swarmpose.tracking.hypotheses import MERGE_SHARE, hypothesis_groups
 from swarmpose.tracking.init_pose import FACINGS_DEG, torso_pose, turned
 from swarmpose.tracking.lift import lift_eval_joints
 from swarmpose.tracking.limb_flips import limb_flips
-from swarmpose.tracking.objective import JointTargets, Objective
+from swarmpose.tracking.objective import JointTargets, Objective, search_split
 from swarmpose.tracking.one_euro import PoseFilter
 from swarmpose.tracking.pso import PsoResult, minimise
 from swarmpose.tracking.result import BodyResult, lost_body
@@ -94,15 +97,6 @@ def observed_depth(depth: np.ndarray) -> np.ndarray:
     the scorer's "no measurement"."""
     depth = np.asarray(depth, dtype=np.float32)
     return np.where(np.isfinite(depth) & (depth > 0), depth, np.float32(0.0))
-
-
-def search_split(spent_s: dict[str, float], pso_ms: float) -> dict[str, float]:
-    """Where a frame's search (``pso_ms``, ms) went, from :attr:`Objective.spent_s` (s):
-    ``score`` (the launch: forward kinematics and every term on the device), ``joint_term``
-    (combining the terms on the host) and ``pso_update`` (the swarm's own arithmetic and
-    everything else), all ms."""
-    parts = {"score": 1000 * spent_s["score"], "joint_term": 1000 * spent_s["joints"]}
-    return {**parts, "pso_update": max(pso_ms - sum(parts.values()), 0.0)}
 
 
 class BodyTracker:
@@ -223,6 +217,7 @@ class BodyTracker:
         rng = np.random.default_rng([self.config.seed, frame.index])
         pso = self.config.pso_config
         timings: dict[str, float] = {}
+        proposals: list[np.ndarray] = []  # limb flips and arm proposals (tracking only)
         if state == "init":
             seeds = self._initialise(centre, targets, depth, rng, timings)
             centre = seeds[0]
@@ -250,20 +245,22 @@ class BodyTracker:
             room = pso.particles - len(seeds)
             if arms and room > 0:  # as many as the swarm has room for
                 t_arms = time.perf_counter()
-                seeds += arm_proposals(self.body, centre, depth, self.intrinsics, box, scene)[:room]
+                proposals += arm_proposals(self.body, centre, depth, self.intrinsics, box, scene)[:room]
                 timings["arms"] = 1000 * (time.perf_counter() - t_arms)
-                room = pso.particles - len(seeds)
+                room = pso.particles - len(seeds) - len(proposals)
             if self.config.limb_flips and room > 0:
                 t_flips = time.perf_counter()
-                seeds += limb_flips(self.body, centre, most=room)
+                proposals += limb_flips(self.body, centre, most=room)
                 timings["flips"] = 1000 * (time.perf_counter() - t_flips)
-        for i, s in enumerate(seeds[:pso.particles]):
+        for i, s in enumerate((seeds + proposals)[:pso.particles]):
             start[i] = s
 
         t1 = time.perf_counter()
         self.objective.set_frame(depth, box, targets, centre)
+        groups = hypothesis_groups(self.objective, proposals, start, self.config.hypotheses, radius, rng) \
+            if state == "tracking" else None
         self.objective.take_spent()
-        result = self._search(self.objective, start, rng, pso)
+        result = self._search(self.objective, start, rng, pso, groups)
         timings["pso"] = 1000 * (time.perf_counter() - t1)
         timings.update(search_split(self.objective.take_spent(), timings["pso"]))
         best = result.best if state == "init" else self._hold_facing(result)
@@ -397,16 +394,18 @@ class BodyTracker:
             return []
         return self._initialise(centre, targets, depth, rng, timings, max(self.config.generations // 4, 1))[:2]
 
-    def _search(self, objective: Objective, start: np.ndarray, rng: np.random.Generator, pso) -> PsoResult:
+    def _search(self, objective: Objective, start: np.ndarray, rng: np.random.Generator, pso,
+                groups: np.ndarray | None = None) -> PsoResult:
         """One PSO of ``objective`` from ``start`` (P, 36): coarse to fine when the objective
         renders and has a coarse level (the first ``config.coarse_share`` of the generations on
-        it), else at full resolution throughout."""
+        it), else at full resolution throughout; ``groups``: sub-swarms (:mod:`swarmpose.tracking.hypotheses`)."""
         coarse = objective.uses_depth and objective.coarse is not None
         refine_at = self.config.refine_at(pso.generations) if coarse else 0
         objective.coarse_active = refine_at > 0
         try:
             return minimise(objective, start, self.lo, self.hi, rng, pso, search.renormalise, search.perturb,
-                            refine_at=refine_at, refine=objective.use_full_resolution)
+                            refine_at=refine_at, refine=objective.use_full_resolution, groups=groups,
+                            merge_at=int(MERGE_SHARE * pso.generations))
         finally:
             objective.coarse_active = False
 

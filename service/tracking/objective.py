@@ -389,3 +389,12 @@ class Objective:
         spent["joints"] += time.perf_counter() - t1
         spent["calls"] += 1
         return total
+
+
+def search_split(spent_s: dict[str, float], pso_ms: float) -> dict[str, float]:
+    """Where a frame's search (``pso_ms``, ms) went, from :attr:`Objective.spent_s` (s):
+    ``score`` (the launch: forward kinematics and every term on the device), ``joint_term``
+    (combining the terms on the host) and ``pso_update`` (the swarm's own arithmetic and
+    everything else), all ms."""
+    parts = {"score": 1000 * spent_s["score"], "joint_term": 1000 * spent_s["joints"]}
+    return {**parts, "pso_update": max(pso_ms - sum(parts.values()), 0.0)}

@@ -15,6 +15,13 @@ Perturbed variant (after the paper's ref [26]): every ``perturb_every`` generati
 random ``perturb_fraction`` of the particles (never the one holding the global best) is
 moved by a caller-supplied ``perturb`` function and loses its velocity; personal bests
 are kept, so a perturbation can only add exploration.
+
+Sub-swarms (``groups``): until generation ``merge_at`` each particle follows the best of its
+own group instead of the swarm's (a local-best topology of disjoint groups, as niching PSOs
+keep several basins apart); from then on all follow the global best. A group started around
+a hypothesis far from the rest (the tracker's limb flips) is refined in its own basin before
+it competes, instead of being pulled at once towards a best that is better only because the
+rest of the hypothesis' pose has not been refined yet. The group bests are never perturbed.
 """
 
 from __future__ import annotations
@@ -87,11 +94,22 @@ def _step_within(x: np.ndarray, v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -
     return np.clip(x + v, lo, hi) - x
 
 
+def group_leaders(values: np.ndarray, groups: np.ndarray) -> np.ndarray:
+    """(P,) for each particle the index of the lowest of ``values`` (P,) within its group
+    (``groups`` (P,) labels)."""
+    lead = np.empty(len(values), dtype=int)
+    for label in np.unique(groups):
+        members = np.flatnonzero(groups == label)
+        lead[members] = members[np.argmin(values[members])]
+    return lead
+
+
 def minimise(objective: Callable[[np.ndarray], np.ndarray], start: np.ndarray, lo: np.ndarray, hi: np.ndarray,
              rng: np.random.Generator, config: PsoConfig = PsoConfig(),
              project: Callable[[np.ndarray], np.ndarray] | None = None,
              perturb: Callable[[np.ndarray, np.random.Generator], np.ndarray] | None = None,
-             refine_at: int = 0, refine: Callable[[], None] | None = None) -> PsoResult:
+             refine_at: int = 0, refine: Callable[[], None] | None = None,
+             groups: np.ndarray | None = None, merge_at: int = 0) -> PsoResult:
     """Minimise ``objective`` (P, D) -> (P,) from initial positions ``start`` (P, D).
 
     lo, hi: (D,) bounds (±inf allowed); start is clipped into them. Generation 0 evaluates
@@ -102,8 +120,13 @@ def minimise(objective: Callable[[np.ndarray], np.ndarray], start: np.ndarray, l
     generation ``refine_at`` (it switches ``objective`` to its final, finer form) and the
     personal bests are scored again with it (P more hypotheses), so that values of the two
     forms never compete.
+
+    groups: (P,) integer labels of the sub-swarms (see the module docstring), followed apart
+    until generation ``merge_at``; None: one swarm throughout.
     """
     x = np.clip(np.array(start, dtype=np.float64), lo, hi)
+    if groups is not None and np.shape(groups) != (len(x),):
+        raise ConfigError(f"groups has shape {np.shape(groups)}, expected ({len(x)},): one label per particle")
     if project is not None:
         x = project(x)
     p_count, dim = x.shape
@@ -124,7 +147,9 @@ def minimise(objective: Callable[[np.ndarray], np.ndarray], start: np.ndarray, l
             g = int(np.argmin(pbest_val))
             evaluations += p_count
         r1, r2 = rng.random((2, p_count, dim))
-        pull = config.c1 * r1 * (pbest - x) + config.c2 * r2 * (pbest[g] - x)
+        lead = group_leaders(pbest_val, groups) if groups is not None and k < merge_at else None
+        social = pbest[g] if lead is None else pbest[lead]
+        pull = config.c1 * r1 * (pbest - x) + config.c2 * r2 * (social - x)
         v = omega * (v + pull) if config.update == "constriction" else pull + omega * v
         v = _step_within(x, v, lo, hi)
         x = x + v
@@ -132,7 +157,7 @@ def minimise(objective: Callable[[np.ndarray], np.ndarray], start: np.ndarray, l
             x = project(x)
         if perturbing and k % config.perturb_every == 0:
             chosen = np.flatnonzero(rng.random(p_count) < config.perturb_fraction)
-            chosen = chosen[chosen != g]
+            chosen = chosen[(chosen != g) & ~np.isin(chosen, () if lead is None else lead)]
             if chosen.size:
                 x[chosen] = np.clip(perturb(x[chosen], rng), lo, hi)
                 if project is not None:

@@ -16,13 +16,13 @@ def test_a_record_is_read_back_only_with_its_own_settings(tmp_path):
 
 
 def test_a_record_made_before_a_setting_existed_reads_as_what_the_tracker_did_then(tmp_path):
-    """Records written before arm_prior, limb_flips, hidden_lifts and arm_proposals existed lack
-    them: they were made with the prior off (0, still its default), without flips, with every lift
-    in the 3D term and without arm proposals (on by default now), so they resume a run with those
-    off, and neither the default run nor one with the prior on."""
+    """Records written before arm_prior, limb_flips, hidden_lifts, arm_proposals and hypotheses
+    existed lack them: they were made with the prior off (0, still its default), without flips,
+    with every lift in the 3D term, without arm proposals and without sub-swarms (on by default
+    now), so they resume a run with those off, and neither the default run nor one with the prior on."""
     path = tmp_path / "old.json"
     write_record(path, {"mpjpe_mm": 50.0, "particles": 64, "generations": 64, "max_people": 1})
-    then = {"limb_flips": False, "hidden_lifts": False, "arm_proposals": False}
+    then = {"limb_flips": False, "hidden_lifts": False, "arm_proposals": False, "hypotheses": 0}
     assert read_record(path, tracker_settings(then))["mpjpe_mm"] == 50.0
     assert read_record(path, tracker_settings(None)) is None, "the default run has flips"
     assert read_record(path, tracker_settings({"limb_flips": False})) is None, "and drops hidden lifts"
@@ -50,7 +50,7 @@ def test_utdmhad_records_carry_the_automatic_height_only_where_it_acts(tmp_path)
     assert read_record(old, variant_settings(on, "hybrid", "default")) is None
     assert read_record(old, variant_settings(on, "hybrid", "measured"))["mpjpe_mm"] == 70.0
     old_lift = tmp_path / "old_lift.json"
-    write_record(old_lift, {"mpjpe_mm": 55.0, **tracker_settings({"arm_proposals": False})})
+    write_record(old_lift, {"mpjpe_mm": 55.0, **tracker_settings({"arm_proposals": False, "hypotheses": 0})})
     assert read_record(old_lift, variant_settings(on, "lift", "default"))["mpjpe_mm"] == 55.0
     assert variant_settings(tracker_settings(None), "hybrid", "default")["auto_height"] is True  # the default
     new = tmp_path / "new.json"
@@ -76,9 +76,27 @@ def test_records_of_the_modes_the_arm_proposals_do_not_act_in_resume_without_the
     from swarmpose.bench.store import mode_settings
 
     old = tmp_path / "old.json"
-    write_record(old, {"mpjpe_mm": 90.0, **tracker_settings({"arm_proposals": False})})
+    then = tracker_settings({"arm_proposals": False, "hypotheses": 0})  # before both settings
+    write_record(old, {"mpjpe_mm": 90.0, **then})
     for mode in ("joints", "lift"):
-        assert read_record(old, mode_settings(tracker_settings(None), mode))["mpjpe_mm"] == 90.0
+        assert read_record(old, mode_settings(tracker_settings({"hypotheses": 0}), mode))["mpjpe_mm"] == 90.0
     for mode in ("hybrid", "depth"):
-        assert read_record(old, mode_settings(tracker_settings(None), mode)) is None
+        assert read_record(old, mode_settings(tracker_settings({"hypotheses": 0}), mode)) is None
         assert mode_settings(tracker_settings({"arm_proposals": False}), mode)["arm_proposals"] is False
+
+
+def test_records_made_before_the_hypotheses_sub_swarms_resume_only_where_they_do_not_act(tmp_path):
+    """A record without ``hypotheses`` was made with single-particle proposals: every mode that
+    searches tracks again by default and resumes with ``--hypotheses 0``; the lift mode (no
+    search) resumes either way."""
+    from swarmpose.bench.store import mode_settings
+
+    for mode in ("lift", "hybrid", "depth", "joints"):
+        old = tmp_path / f"old-{mode}.json"
+        settings = mode_settings(tracker_settings(None), mode)
+        write_record(old, {"mpjpe_mm": 70.0, **{k: v for k, v in settings.items() if k != "hypotheses"}})
+        if mode == "lift":
+            assert read_record(old, settings)["mpjpe_mm"] == 70.0
+            continue
+        assert read_record(old, settings) is None
+        assert read_record(old, mode_settings(tracker_settings({"hypotheses": 0}), mode))["mpjpe_mm"] == 70.0
