@@ -310,3 +310,11 @@ def transform_points(bones: np.ndarray, rest: np.ndarray, transforms: np.ndarray
     check_shape("rest points", rest, (len(bones), 3))
     t = transforms[:, bones]  # (P, N, 3, 4)
     return np.einsum("pnij,nj->pni", t[..., :3], rest) + t[..., 3]
+
+
+def root_turn_deg(a: np.ndarray, b: np.ndarray) -> float | np.ndarray:
+    """The angle (degrees) of the rotation between the root orientations of pose a (36,) and
+    pose b (36,), or of each of poses b (P, 36) (unit or not: the quaternions are normalised)."""
+    qa, qb = a[3:7] / np.linalg.norm(a[3:7]), b[..., 3:7] / np.linalg.norm(b[..., 3:7], axis=-1, keepdims=True)
+    turn = np.degrees(2.0 * np.arccos(np.clip(np.abs(qb @ qa), 0.0, 1.0)))
+    return float(turn) if turn.ndim == 0 else turn

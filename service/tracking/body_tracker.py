@@ -36,6 +36,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from swarmpose.body.kinematics import root_turn_deg
 from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
@@ -56,7 +57,7 @@ from swarmpose.tracking.lift import lift_eval_joints
 from swarmpose.tracking.limb_flips import limb_flips
 from swarmpose.tracking.objective import JointTargets, Objective, search_split
 from swarmpose.tracking.one_euro import PoseFilter
-from swarmpose.tracking.pso import PsoResult, minimise
+from swarmpose.tracking.pso import PsoConfig, PsoResult, minimise
 from swarmpose.tracking.result import BodyResult, lost_body
 
 HISTORY = 5
@@ -82,14 +83,6 @@ def recheck_due(index: int, age: int, every: int) -> bool:
     """Whether frame ``index`` of a track ``age`` frames old (1 = the first after its start)
     re-checks the facings: every ``every`` frames and at :data:`YOUNG_RECHECKS` (0: never)."""
     return bool(every) and (index % every == 0 or age in YOUNG_RECHECKS)
-
-
-def root_turn_deg(a: np.ndarray, b: np.ndarray) -> float | np.ndarray:
-    """The angle (degrees) of the rotation between the root orientations of pose a (36,) and
-    pose b (36,), or of each of poses b (P, 36) (unit or not: the quaternions are normalised)."""
-    qa, qb = a[3:7] / np.linalg.norm(a[3:7]), b[..., 3:7] / np.linalg.norm(b[..., 3:7], axis=-1, keepdims=True)
-    turn = np.degrees(2.0 * np.arccos(np.clip(np.abs(qb @ qa), 0.0, 1.0)))
-    return float(turn) if turn.ndim == 0 else turn
 
 
 def observed_depth(depth: np.ndarray) -> np.ndarray:
@@ -257,11 +250,15 @@ class BodyTracker:
 
         t1 = time.perf_counter()
         self.objective.set_frame(depth, box, targets, centre)
-        groups = hypothesis_groups(self.objective, proposals, start, self.config.hypotheses, radius, rng) \
-            if state == "tracking" else None
+        groups = None
+        if state == "tracking":  # the ranking's time is its own, not the search's
+            t_rank = time.perf_counter()
+            groups = hypothesis_groups(self.objective, proposals, start, self.config.hypotheses, radius, rng,
+                                       keep=len(seeds))
+            timings["hypotheses"] = 1000 * (time.perf_counter() - t_rank)
         self.objective.take_spent()
         result = self._search(self.objective, start, rng, pso, groups)
-        timings["pso"] = 1000 * (time.perf_counter() - t1)
+        timings["pso"] = 1000 * (time.perf_counter() - t1) - timings.get("hypotheses", 0.0)
         timings.update(search_split(self.objective.take_spent(), timings["pso"]))
         best = result.best if state == "init" else self._hold_facing(result)
         self.objective(best[None])
@@ -394,7 +391,7 @@ class BodyTracker:
             return []
         return self._initialise(centre, targets, depth, rng, timings, max(self.config.generations // 4, 1))[:2]
 
-    def _search(self, objective: Objective, start: np.ndarray, rng: np.random.Generator, pso,
+    def _search(self, objective: Objective, start: np.ndarray, rng: np.random.Generator, pso: PsoConfig,
                 groups: np.ndarray | None = None) -> PsoResult:
         """One PSO of ``objective`` from ``start`` (P, 36): coarse to fine when the objective
         renders and has a coarse level (the first ``config.coarse_share`` of the generations on

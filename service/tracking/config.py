@@ -62,8 +62,9 @@ class TrackerConfig:
                                         "reach that the body does not explain, and to the other arm's mirror "
                                         "image, joins the swarm as a particle")
     hypotheses: int = setting(2, "every frame, the best this many of the limb flips and arm proposals each start "
-                                 "a sub-swarm (12 of 64 particles) that refines it apart from the track for 3/4 of "
-                                 "the generations before they compete (0 = off: single particles)",
+                                 "a sub-swarm (3/16 of the particles, 12 of 64) that refines it apart from the track "
+                                 "for the first 3/4 of the generations before they compete (0 = off: single "
+                                 "particles)",
                               minimum=0, maximum=4)
     hidden_lifts: bool = setting(True, "a limb joint the last solution hides behind its own body, where the depth "
                                        "shows that occluder, leaves the 3D joint term (its lift measured the "

@@ -9,10 +9,10 @@ pulls it over at once. On the dance seen from the side with MoveNet the true far
 proposed within 57-73 mm and lost every frame that way (BENCHMARKS.md, issue 12, eleventh part).
 
 So the best :attr:`TrackerConfig.hypotheses` of them by the objective each start a sub-swarm of
-:data:`GROUP_SHARE` of the particles, spread around it at half the track's search radii. Until
-:data:`MERGE_SHARE` of the generations each group follows its own best
-(:func:`swarmpose.tracking.pso.minimise`'s ``groups``), then all follow the best of all: a
-hypothesis competes after it has been refined in its own basin.
+:data:`GROUP_SHARE` of the particles (at least 2), spread around it at half the track's search
+radii. In the generations before :data:`MERGE_SHARE` of the budget (1-47 of 64) each group
+follows its own best (:func:`swarmpose.tracking.pso.minimise`'s ``groups``), then all follow the
+best of all: a hypothesis competes after it has been refined in its own basin.
 """
 
 from __future__ import annotations
@@ -26,31 +26,37 @@ from swarmpose.tracking import search
 GROUP_SHARE = 12 / 64
 """Share of the swarm's particles in each hypothesis' sub-swarm (12 of the default 64)."""
 MERGE_SHARE = 0.75
-"""Share of the generations for which the sub-swarms follow their own bests."""
+"""The sub-swarms follow their own bests in the generations before this share of the budget
+(``merge_at`` = 48 of 64: generations 1-47)."""
 SPREAD_SHARE = 0.5
 """A sub-swarm's start region: this share of the track's angle radii, ±2 cm and ±0.05 rad at the root."""
 
 
 def hypothesis_groups(score: Callable[[np.ndarray], np.ndarray], proposals: Sequence[np.ndarray],
                       start: np.ndarray, count: int, angle_radius: float | np.ndarray,
-                      rng: np.random.Generator) -> np.ndarray | None:
+                      rng: np.random.Generator, keep: int = 2) -> np.ndarray | None:
     """Sub-swarms around the ``count`` best of ``proposals`` (each (36,)) by ``score`` ((N, 36) ->
-    (N,)), written over the last particles of ``start`` (P, 36) in place; returns the (P,) group
-    labels (0: the track's swarm, k: the k-th best hypothesis), or None when there is no
-    proposal, ``count`` is 0, or the swarm is too small to leave the track 2 particles besides
-    sub-swarms of 2. ``angle_radius``: the track's per-frame angle radii (scalar or (29,), rad)."""
+    (N,); non-finite scores never get one), written over the last particles of ``start`` (P, 36)
+    in place, below which its first ``keep`` rows (the track's own seeds) stay untouched; returns
+    the (P,) group labels (0: the track's swarm, k: the k-th best hypothesis), or None when no
+    sub-swarm of at least 2 particles fits (no proposal, ``count`` 0, or too few particles beyond
+    ``keep``). ``angle_radius``: the track's per-frame angle radii (scalar or (29,), rad). A
+    proposal without a sub-swarm whose row a block covers is dropped."""
     particles = len(start)
     size = max(int(round(GROUP_SHARE * particles)), 2)
-    count = min(count, len(proposals), (particles - 2) // size)
+    count = min(count, len(proposals), (particles - max(keep, 2)) // size)
     if count <= 0:
         return None
     values = np.asarray(score(np.stack(proposals)), dtype=float)
+    ranked = [int(i) for i in np.argsort(values) if np.isfinite(values[i])][:count]
+    if not ranked:
+        return None
     groups = np.zeros(particles, dtype=int)
-    for rank, index in enumerate(np.argsort(values)[:count]):
-        top = particles - rank * size
+    for rank, index in enumerate(ranked):
+        block_end = particles - rank * size
         block = search.spread(proposals[index], size, rng, np.full(3, 0.02), 0.05,
                               SPREAD_SHARE * np.asarray(angle_radius))
         block[0] = proposals[index]
-        start[top - size:top] = block
-        groups[top - size:top] = rank + 1
+        start[block_end - size:block_end] = block
+        groups[block_end - size:block_end] = rank + 1
     return groups

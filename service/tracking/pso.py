@@ -16,8 +16,8 @@ random ``perturb_fraction`` of the particles (never the one holding the global b
 moved by a caller-supplied ``perturb`` function and loses its velocity; personal bests
 are kept, so a perturbation can only add exploration.
 
-Sub-swarms (``groups``): until generation ``merge_at`` each particle follows the best of its
-own group instead of the swarm's (a local-best topology of disjoint groups, as niching PSOs
+Sub-swarms (``groups``): in the generations before ``merge_at`` each particle follows the best
+of its own group instead of the swarm's (a local-best topology of disjoint groups, as niching PSOs
 keep several basins apart); from then on all follow the global best. A group started around
 a hypothesis far from the rest (the tracker's limb flips) is refined in its own basin before
 it competes, instead of being pulled at once towards a best that is better only because the
@@ -121,8 +121,8 @@ def minimise(objective: Callable[[np.ndarray], np.ndarray], start: np.ndarray, l
     personal bests are scored again with it (P more hypotheses), so that values of the two
     forms never compete.
 
-    groups: (P,) integer labels of the sub-swarms (see the module docstring), followed apart
-    until generation ``merge_at``; None: one swarm throughout.
+    groups: (P,) integer labels of the sub-swarms (see the module docstring), followed apart in
+    generations 1 .. ``merge_at`` - 1; None: one swarm throughout.
     """
     x = np.clip(np.array(start, dtype=np.float64), lo, hi)
     if groups is not None and np.shape(groups) != (len(x),):

@@ -48,3 +48,23 @@ def test_no_groups_without_proposals_count_or_room():
     assert one.max() == 1 and np.sum(one == 1) == 12, "as many groups as proposals at most"
     small = hypothesis_groups(score, poses, np.zeros((16, 36)), 2, 0.4, rng)
     assert np.bincount(small).tolist() == [10, 3, 3], "a smaller swarm, smaller groups"
+
+
+def test_the_tracks_own_seeds_are_never_covered():
+    """``keep`` rows at the front (the previous solution, its history, the challenger) stay as they
+    were: a small swarm gets fewer sub-swarms, or none."""
+    poses, score = proposals_and_score()
+    for particles, keep, expected in ((12, 11, None), (12, 10, 1), (12, 8, 2), (16, 10, 2), (8, 6, 1), (8, 7, None)):
+        start = np.full((particles, 36), 7.0)
+        groups = hypothesis_groups(score, poses, start, 2, 0.4, np.random.default_rng(2), keep=keep)
+        assert np.all(start[:keep] == 7.0), (particles, keep)
+        assert (groups is None if expected is None else groups.max() == expected), (particles, keep, groups)
+
+
+def test_a_proposal_that_scores_nan_gets_no_sub_swarm():
+    poses, _ = proposals_and_score(3)
+    groups = hypothesis_groups(lambda x: np.array([np.nan, 1.0, np.inf]), poses, np.zeros((64, 36)), 2, 0.4,
+                               np.random.default_rng(3))
+    assert groups.max() == 1 and np.sum(groups == 1) == 12
+    assert hypothesis_groups(lambda x: np.full(len(x), np.nan), poses, np.zeros((64, 36)), 2, 0.4,
+                             np.random.default_rng(3)) is None

@@ -155,7 +155,8 @@ def test_coarse_to_fine_tracks_and_ends_at_full_resolution(body, sequence):
 def test_root_turn_is_the_angle_between_root_orientations():
     """By hand: quarter and half turns about the vertical, the quaternion's sign and scale do not
     matter, and a track replaced by its mirror (180°) counts as a turn past REPLACED_TURN_DEG."""
-    from swarmpose.tracking.body_tracker import REPLACED_TURN_DEG, root_turn_deg
+    from swarmpose.body.kinematics import root_turn_deg
+    from swarmpose.tracking.body_tracker import REPLACED_TURN_DEG
 
     def about_y(deg: float, scale: float = 1.0) -> np.ndarray:
         pose = np.zeros(36)
@@ -209,7 +210,8 @@ def test_a_different_turned_solution_becomes_the_challenger_and_reset_forgets_it
     reset() forgets the challenger and the track's age."""
     from scipy.spatial.transform import Rotation
 
-    from swarmpose.tracking.body_tracker import REPLACED_TURN_DEG, root_turn_deg
+    from swarmpose.body.kinematics import root_turn_deg
+    from swarmpose.tracking.body_tracker import REPLACED_TURN_DEG
     from swarmpose.tracking.pso import PsoResult
 
     body = load_body("builtin", "default")
@@ -231,3 +233,36 @@ def test_a_different_turned_solution_becomes_the_challenger_and_reset_forgets_it
     assert tracker.challenger is lying and tracker.history == [front]
     tracker.reset()
     assert tracker.challenger is None and tracker.age == 0 and tracker.previous is None
+
+
+def test_the_best_hypotheses_search_in_sub_swarms_of_their_own(body, sequence, monkeypatch):
+    """With ``hypotheses = 2`` a tracked frame's search gets the groups: the track's swarm first,
+    then sub-swarms of round(3/16 P) particles at the end, each started on a pose that differs
+    from the previous solution (the swarm's first particle) in one limb alone (a flip or an arm
+    proposal); with 0, no frame's search has groups."""
+    import swarmpose.tracking.body_tracker as module
+    from swarmpose.tracking.search import LIMB_COLUMNS
+
+    real, calls = module.minimise, []
+
+    def recording(objective, start, *args, groups=None, **kwargs):
+        calls.append((np.array(start), groups))
+        return real(objective, start, *args, groups=groups, **kwargs)
+
+    monkeypatch.setattr(module, "minimise", recording)
+    track(body, sequence, hypotheses=0)
+    assert calls and all(groups is None for _, groups in calls)
+    calls.clear()
+    track(body, sequence, hypotheses=2)
+    grouped = [(start, groups) for start, groups in calls if groups is not None]
+    assert grouped, "some tracked frame had proposals"
+    limbs = [set(cols.tolist()) for cols in LIMB_COLUMNS[:4]]
+    for start, groups in grouped:
+        size = round(3 / 16 * len(start))
+        labels = sorted(set(groups.tolist()))
+        assert labels[0] == 0 and labels[1:] == list(range(1, len(labels)))
+        for label in labels[1:]:
+            rows = np.flatnonzero(groups == label)
+            assert len(rows) == size and rows[-1] == len(start) - (label - 1) * size - 1
+            changed = set(np.flatnonzero(np.abs(start[rows[0]] - start[0]) > 1e-12).tolist())
+            assert changed and any(changed <= limb for limb in limbs), changed
