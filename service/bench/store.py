@@ -30,7 +30,7 @@ def mode_settings(tracker: dict, mode: str) -> dict:
     nothing (the joints and lift modes have no depth term to judge them) and ``hypotheses`` 0 in the
     lift mode (no search), so that their records made before the setting existed still match."""
     return {**tracker, "arm_proposals": bool(tracker.get("arm_proposals", True)) and mode not in ("joints", "lift"),
-            "hypotheses": 0 if mode == "lift" else int(tracker.get("hypotheses", 2))}
+            "hypotheses": 0 if mode == "lift" else int(tracker.get("hypotheses", TRACKER_DEFAULTS["hypotheses"]))}
 
 
 def seeded(settings: dict, seed: int) -> tuple[dict, str]:

@@ -94,13 +94,18 @@ def _step_within(x: np.ndarray, v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -
     return np.clip(x + v, lo, hi) - x
 
 
-def group_leaders(values: np.ndarray, groups: np.ndarray) -> np.ndarray:
+def group_members(groups: np.ndarray) -> list[np.ndarray]:
+    """The particle indices of each group of ``groups`` (P,) labels, in label order (once per run:
+    the groups do not change)."""
+    return [np.flatnonzero(groups == label) for label in np.unique(groups)]
+
+
+def group_leaders(values: np.ndarray, members: list[np.ndarray]) -> np.ndarray:
     """(P,) for each particle the index of the lowest of ``values`` (P,) within its group
-    (``groups`` (P,) labels)."""
+    (``members``: :func:`group_members`)."""
     lead = np.empty(len(values), dtype=int)
-    for label in np.unique(groups):
-        members = np.flatnonzero(groups == label)
-        lead[members] = members[np.argmin(values[members])]
+    for rows in members:
+        lead[rows] = rows[np.argmin(values[rows])]
     return lead
 
 
@@ -136,6 +141,7 @@ def minimise(objective: Callable[[np.ndarray], np.ndarray], start: np.ndarray, l
     pbest, pbest_val = x.copy(), values.copy()
     g = int(np.argmin(pbest_val))
     history = [pbest_val[g]]
+    members = group_members(groups) if groups is not None else None
     omega = config.omega
     perturbing = config.variant == "perturbed" and perturb is not None
     evaluations = p_count * (config.generations + 1)
@@ -147,7 +153,7 @@ def minimise(objective: Callable[[np.ndarray], np.ndarray], start: np.ndarray, l
             g = int(np.argmin(pbest_val))
             evaluations += p_count
         r1, r2 = rng.random((2, p_count, dim))
-        lead = group_leaders(pbest_val, groups) if groups is not None and k < merge_at else None
+        lead = group_leaders(pbest_val, members) if members is not None and k < merge_at else None
         social = pbest[g] if lead is None else pbest[lead]
         pull = config.c1 * r1 * (pbest - x) + config.c2 * r2 * (social - x)
         v = omega * (v + pull) if config.update == "constriction" else pull + omega * v

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from swarmpose.core.errors import ConfigError
-from swarmpose.tracking.pso import PsoConfig, constriction_factor, group_leaders, minimise
+from swarmpose.tracking.pso import PsoConfig, constriction_factor, group_leaders, group_members, minimise
 
 
 def sphere(x: np.ndarray) -> np.ndarray:
@@ -148,7 +148,7 @@ def test_personal_bests_are_returned_with_their_values():
 def test_group_leaders_by_hand():
     values = np.array([5.0, 1.0, 3.0, 0.5, 4.0, 2.0])
     groups = np.array([0, 0, 1, 0, 1, 2])
-    assert group_leaders(values, groups).tolist() == [3, 3, 2, 3, 2, 5]
+    assert group_leaders(values, group_members(groups)).tolist() == [3, 3, 2, 3, 2, 5]
 
 
 def limb_and_rest(x: np.ndarray) -> np.ndarray:
