@@ -16,7 +16,7 @@ from swarmpose.bench.track import bench_track, format_track_bench
 from swarmpose.bench.utdmhad import ACTIONS, SHAPES, SUBJECTS, run_utdmhad
 from swarmpose.bench.utdmhad import format_table as format_utdmhad_table
 from swarmpose.bench.utdmhad import summary as utdmhad_summary
-from swarmpose.cli.common import DEFAULTS, add_body_options, non_negative_float, positive_int, quiet
+from swarmpose.cli.common import DEFAULTS, add_body_options, non_negative_float, non_negative_int, positive_int, quiet
 from swarmpose.cli.settings import add_flags, from_args
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import parse_size
@@ -69,7 +69,8 @@ def cmd_bench_accuracy(args: argparse.Namespace) -> int:
     """The tracker over the benchmark matrix: per cell and mode Δ, A(100), lost frames, facing."""
     tracker = {"particles": args.particles, "generations": args.generations, "max_people": args.max_people,
                "arm_prior": args.arm_prior, "limb_flips": args.limb_flips, "hidden_lifts": args.hidden_lifts,
-               "arm_proposals": args.arm_proposals, "hypotheses": args.hypotheses}
+               "arm_proposals": args.arm_proposals, "hypotheses": args.hypotheses,
+               "backward": args.backward}
     records = run_matrix(Path(args.out), subset=args.subset, detectors=args.detectors, modes=args.modes,
                          frames=args.frames, tracker=tracker, assets=args.assets, progress=not quiet(args),
                          seeds=args.seeds)
@@ -90,7 +91,8 @@ def cmd_bench_utdmhad(args: argparse.Namespace) -> int:
     """The tracker on UTD-MHAD's real Kinect sequences against the Kinect skeleton."""
     tracker = {"particles": args.particles, "generations": args.generations, "arm_prior": args.arm_prior,
                "limb_flips": args.limb_flips, "hidden_lifts": args.hidden_lifts, "auto_height": args.auto_height,
-               "arm_proposals": args.arm_proposals, "hypotheses": args.hypotheses}
+               "arm_proposals": args.arm_proposals, "hypotheses": args.hypotheses,
+               "backward": args.backward}
     records = run_utdmhad(Path(args.out), modes=args.modes, detectors=args.detectors, shapes=args.shapes,
                           frames=args.frames, tracker=tracker, subjects=args.subjects,
                           actions=tuple(int(a) for a in args.actions), assets=args.assets,
@@ -128,7 +130,7 @@ def _add_assets(p: argparse.ArgumentParser) -> None:
 
 
 def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
-    """--arm-prior, --limb-flips, --hidden-lifts, --arm-proposals and --hypotheses of the resumable tracking
+    """--arm-prior, --limb-flips, --hidden-lifts, --arm-proposals, --hypotheses and --backward of the resumable tracking
     benchmarks (a record keeps them, so a resume with other values tracks again)."""
     p.add_argument("--arm-prior", type=non_negative_float, default=0.0,
                    help="the tracker's w_A (cost per rad² of the arms away from rest, times how side on the "
@@ -144,6 +146,9 @@ def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hypotheses", type=int, choices=range(5), default=2, metavar="N",
                    help="the best N limb flips and arm proposals each refined by a sub-swarm before they compete "
                         "(0-4; 2: the tracker's default; 0: single particles, as before)")
+    p.add_argument("--backward", type=non_negative_int, default=0, metavar="N",
+                   help="the offline backward pass: every N frames each track run backwards over them from its "
+                        "last solution (0: off, the tracker's default; N >= --frames: the whole sequence)")
 
 
 def _add_budget_and_assets(p: argparse.ArgumentParser) -> None:

@@ -85,7 +85,7 @@ class Tracker:
                    else BodyTracker)
         self.pipeline = FramePipeline(
             self.detector, lambda intr, body_id: tracker(self.body, intr, self.config, body_id=body_id),
-            self.config.max_people, self.config.retire_frames)
+            self.config.max_people, self.config.retire_frames, backward=self.config.backward)
         self._next_index = 0
         self._closed = False
 
@@ -113,6 +113,10 @@ class Tracker:
         """Track one frame of a source (a skipped frame gives a result that says why)."""
         if self._closed:
             raise ConfigError("this Tracker is closed; make a new one")
+        if self.config.backward:
+            raise ConfigError(f"backward = {self.config.backward}: the backward pass needs the frames after this "
+                              "one; track a whole recording with swarmpose.track(source, backward=N), or set "
+                              "backward 0")
         self._next_index = frame.index + 1
         return self.pipeline.process(frame)
 

@@ -2,7 +2,9 @@
 
 ``swarmpose track`` and ``eval``, and :func:`swarmpose.track`, use it. Each frame's
 result goes, as the protocol's frame message, to every sink (files, scoring, ...) before
-the next frame is read, so an interrupted run keeps everything it produced. A sink that
+the next frame is read, so an interrupted run keeps everything it produced (with the
+``backward`` setting, a window's frames go after its backward pass, and a stop or an error
+hands on those held first). A sink that
 fails is logged and dropped; the others go on. A source that ends with ``status`` ``"error: …"``
 (a recording that breaks, a camera that vanishes) is logged as a warning and, in a
 :class:`RunSummary`, kept as ``source_error``.
@@ -17,6 +19,7 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 from swarmpose.core.progress import progress_bar
+from swarmpose.pipeline.backward import BackwardPass
 from swarmpose.pipeline.step import FramePipeline, describe_error
 from swarmpose.publish.sink import Sink
 from swarmpose.sources.base import Frame, SkippedFrame
@@ -62,18 +65,44 @@ class RunSummary:
 
 
 def results(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline, frames: int = 0,
-            summary: RunSummary | None = None) -> Iterator[FrameResult]:
+            summary: RunSummary | None = None, stop: threading.Event | None = None) -> Iterator[FrameResult]:
     """The result of every item of ``source`` (at most ``frames``; 0 = all), counted in ``summary``.
-    No item is read past the ``frames``-th."""
+    No item is read past the ``frames``-th, nor after ``stop`` is set. With the pipeline's
+    ``backward`` window, each window's results come after its backward pass
+    (:mod:`swarmpose.pipeline.backward`), counted with its time; the last ones when the items end."""
     summary = summary if summary is not None else RunSummary()
-    items = iter(source)
-    while not (frames and summary.frames >= frames):
-        item = next(items, _END)
-        if item is _END:
-            return
-        t0 = time.perf_counter()
-        result = pipeline.process(item)
-        summary.count(result, 0.0 if result.skipped else time.perf_counter() - t0)
+    refiner = BackwardPass(pipeline.backward) if pipeline.backward else None
+    if refiner is not None:
+        pipeline.on_step = refiner.record
+    seconds: dict[int, float] = {}  # the forward time of the results held for the backward pass
+    items, read = iter(source), 0
+    try:
+        while not (frames and read >= frames) and not (stop is not None and stop.is_set()):
+            item = next(items, _END)
+            if item is _END:
+                break
+            read += 1
+            t0 = time.perf_counter()
+            result = pipeline.process(item)
+            spent = 0.0 if result.skipped else time.perf_counter() - t0
+            if refiner is None:
+                summary.count(result, spent)
+                yield result
+                continue
+            seconds[result.index] = spent
+            yield from _counted(refiner.add(result), seconds, summary)
+    except Exception:
+        if refiner is not None:  # what was held goes out as the forward pass left it, then the error
+            yield from _counted(refiner.release(), seconds, summary)
+        raise
+    if refiner is not None:
+        yield from _counted(refiner.finish(), seconds, summary)
+
+
+def _counted(done: list[FrameResult], seconds: dict[int, float], summary: RunSummary) -> Iterator[FrameResult]:
+    """``done`` (results after the backward pass) counted in ``summary`` with both passes' time."""
+    for result in done:
+        summary.count(result, seconds.pop(result.index, 0.0) + result.timings_ms.get("backward", 0.0) / 1000)
         yield result
 
 
@@ -89,7 +118,7 @@ def run_sequence(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline
     try:
         with progress_bar("track", total, enabled=progress) as bar:
             frames_of = {}
-            for result in results(remember_frames(source, frames_of), pipeline, frames, summary):
+            for result in results(remember_frames(source, frames_of), pipeline, frames, summary, stop):
                 message = result.to_message(camera)
                 frame = frames_of.pop(result.index, None)
                 for sink in list(live):
@@ -101,9 +130,7 @@ def run_sequence(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline
                         summary.sink_errors.append(what)
                         live.remove(sink)
                 bar.update(1)
-                if stop is not None and stop.is_set():
-                    summary.interrupted = True
-                    break
+        summary.interrupted = stop is not None and stop.is_set()  # results() read no further
         summary.source_error = "" if summary.interrupted else source_error(source)
         if summary.frames and not summary.tracked and summary.nobody_reason:
             log.warning("nobody was tracked in the %d frames read (%s); each frame's message says why",

@@ -89,7 +89,7 @@ def make_pipeline(body: SkinnedBody, detector: Detector, config: ServiceConfig,
         def make(intrinsics, body_id):
             return BodyTracker(body, intrinsics, t, body_id=body_id)
     return FramePipeline(detector, make, t.max_people, t.retire_frames, personalise_frames=reported,
-                         world=make_world(config.floor, config.coordinates))
+                         world=make_world(config.floor, config.coordinates), backward=t.backward)
 
 
 def warn_of_another_body(source: FrameSource, body: SkinnedBody, config: ServiceConfig) -> None:
@@ -172,6 +172,10 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
     """The worker of ``config`` with its sinks: zenoh (unless ``zenoh_mode`` is off), the replay
     files (``out`` or ``record``), the ground-truth scorer, the log, the health file and (with
     ``progress``) a progress bar. replay: no dropped frames, no pacing, no looping."""
+    if config.tracker.backward:  # before anything is opened
+        raise ConfigError(f"backward = {config.tracker.backward}: the backward pass publishes frames late and needs "
+                          "the recording, which serve and replay do not wait for; run `swarmpose track SOURCE --out "
+                          "DIR --backward N` (the same files as replay), or set backward 0")
     parts = open_parts(config, stack, out=out or config.record)
     worker: Worker | None = None
 

@@ -102,14 +102,19 @@ class FramePipeline:
     before its id is retired; personalise_frames: N when ``make_tracker`` builds trackers that
     personalise their body from N frames (``--personalize``, or the automatic height's upright
     frames), else 0; world: the camera's
-    world frame (floor, origin, coordinates of the messages), None: camera frame only.
+    world frame (floor, origin, coordinates of the messages), None: camera frame only;
+    backward: the offline backward pass's window in frames (:mod:`swarmpose.pipeline.backward`,
+    run by :func:`swarmpose.pipeline.run.results`), 0: none.
     ``detect`` and ``track`` may run in two threads (one each).
     """
 
     def __init__(self, detector: Detector, make_tracker: Callable[[Intrinsics, int], BodyTracker],
                  max_people: int = 1, retire_frames: int = 30, personalise_frames: int = 0,
-                 world: WorldFrame | None = None):
+                 world: WorldFrame | None = None, backward: int = 0):
         self.detector, self.make_tracker = detector, make_tracker
+        self.backward = int(backward)
+        self.on_step = None
+        """Given to every tracker made from now on as its ``on_step`` (the offline backward pass)."""
         self.max_people, self.retire_frames = int(max_people), int(retire_frames)
         self.personalise_frames = int(personalise_frames)
         self.world = world
@@ -221,7 +226,7 @@ class FramePipeline:
             return self._track_people(frame, detection, received_ns, t0)
         try:
             if self.tracker is None or self.intrinsics != frame.intrinsics:
-                self.tracker, self.intrinsics = self.make_tracker(frame.intrinsics, 0), frame.intrinsics
+                self.tracker, self.intrinsics = self._new_tracker(frame.intrinsics, 0), frame.intrinsics
             body = self.tracker.step(frame, detection.joints)
         except Exception as exc:  # a frame that fails to track: no bodies, restart the track
             if self.tracker is not None:
@@ -233,6 +238,11 @@ class FramePipeline:
         timings["total"] = detection.ms + body.timings_ms.get("total", 1000 * (time.perf_counter() - t0))
         return FrameResult(frame.index, frame.timestamp_ns, (body,), detection.note, timings, received_ns=received_ns)
 
+    def _new_tracker(self, intrinsics: Intrinsics, body_id: int) -> BodyTracker:
+        tracker = self.make_tracker(intrinsics, body_id)
+        tracker.on_step = self.on_step
+        return tracker
+
     def _track_people(self, frame: Frame, detection: Detection, received_ns: int, t0: float) -> FrameResult:
         """The several-people half of :meth:`track`."""
         try:
@@ -240,7 +250,7 @@ class FramePipeline:
                 intrinsics, old = frame.intrinsics, self.people
                 if old is not None:  # a new camera: new trackers, the ids and counts go on
                     old.reset()
-                self.people = PeopleTracker(lambda body_id: self.make_tracker(intrinsics, body_id), self.max_people,
+                self.people = PeopleTracker(lambda body_id: self._new_tracker(intrinsics, body_id), self.max_people,
                                             self.retire_frames, first_id=0 if old is None else old.next_id,
                                             counts=None if old is None else old.counts)
                 self.intrinsics = intrinsics

@@ -118,6 +118,7 @@ class BodyTracker:
         self.challenger: np.ndarray | None = None
         """Last frame's winning solution turned away from the track (see :data:`REPLACED_TURN_DEG`)."""
         self.best_counts: dict[str, np.ndarray] | None = None  # the last frame's, see _render
+        self.on_step = None  # called with (self, frame, joints, others_removed) first (the offline backward pass)
         self.filter = (PoseFilter(config.smoothing_cutoff_hz, config.smoothing_beta)
                        if config.smoothing == "one-euro" else None)
         """The published poses' filter (``--smoothing one-euro``); the search never sees its output."""
@@ -187,6 +188,8 @@ class BodyTracker:
         other people's pixels were taken out of ``frame.depth`` (several people), so the lost
         test's depth agreement counts only the model's pixels that have an observation."""
         t0 = time.perf_counter()
+        if self.on_step is not None:
+            self.on_step(self, frame, joints, others_removed)
         depth = np.asarray(frame.depth, dtype=np.float32)
         if depth.shape != (self.intrinsics.height, self.intrinsics.width):
             raise TrackingError(f"frame {frame.index}: depth is {depth.shape[1]}x{depth.shape[0]}, the tracker's "

@@ -69,6 +69,12 @@ class TrackerConfig:
     hidden_lifts: bool = setting(True, "a limb joint the last solution hides behind its own body, where the depth "
                                        "shows that occluder, leaves the 3D joint term (its lift measured the "
                                        "occluder); the 2D term keeps it")
+    backward: int = setting(0, "offline runs (track, eval, the Python API's track): every this many frames, each "
+                               "person's track is run backwards over them from its last solution, and those "
+                               "frames get the backward fit, published this many frames late (a track's start "
+                               "and a side view's limbs settle over frames, which the backward pass starts "
+                               "with); 0 = off. Not with serve or replay, nor with one-euro smoothing",
+                            minimum=0)
     auto_height: bool = setting(True, "a body whose shape is not given (no --shape, not a .glb) is scaled to each "
                                       "person's height, measured on the depth of their first upright frames")
     smoothing: str = setting("off", "smooth the published poses: off (as in evaluation) or one-euro (a One-Euro "
@@ -90,6 +96,13 @@ class TrackerConfig:
 
     def __post_init__(self) -> None:
         check_settings(self)
+        if self.backward and self.mode == "lift":
+            raise ConfigError(f"backward = {self.backward}: the backward pass refits a body model; the lift mode fits "
+                              "none (use hybrid, depth or joints, or backward 0)")
+        if self.backward and self.smoothing != "off":
+            raise ConfigError(f"backward = {self.backward} with smoothing {self.smoothing}: the backward pass "
+                              "publishes its own fits, which the filter would have to run over backwards; choose "
+                              "one (smoothing off, or backward 0)")
         if 0 < self.personalize < 3:
             raise ConfigError(f"personalize = {self.personalize}: a shape needs at least 3 tracked frames "
                               "(0 turns personalisation off)")

@@ -100,3 +100,16 @@ def test_records_made_before_the_hypotheses_sub_swarms_resume_only_where_they_do
             continue
         assert read_record(old, settings) is None
         assert read_record(old, mode_settings(tracker_settings({"hypotheses": 0}), mode))["mpjpe_mm"] == 70.0
+
+
+def test_records_without_the_backward_pass_resume_runs_without_it_and_lift_never_gets_one(tmp_path):
+    """``backward`` is stored with every record; records made before it existed were forward only
+    (0, still the default), and the lift mode, which fits no body, is always made with 0."""
+    from swarmpose.bench.store import mode_settings
+
+    old = tmp_path / "old.json"
+    write_record(old, {"mpjpe_mm": 40.0, **{k: v for k, v in tracker_settings(None).items() if k != "backward"}})
+    assert read_record(old, tracker_settings(None))["mpjpe_mm"] == 40.0
+    assert read_record(old, tracker_settings({"backward": 40})) is None
+    assert mode_settings(tracker_settings({"backward": 40}), "lift")["backward"] == 0
+    assert mode_settings(tracker_settings({"backward": 40}), "hybrid")["backward"] == 40

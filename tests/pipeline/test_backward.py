@@ -1,0 +1,174 @@
+"""The offline backward pass (``backward`` setting, :mod:`swarmpose.pipeline.backward`): against
+the sequence's ground truth, against a backward run made by hand with the tracker itself, with
+several people, and on stops, errors and settings it cannot serve."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import synthesize_scene
+
+import swarmpose
+from swarmpose.body.loader import load_body
+from swarmpose.cli.main import main
+from swarmpose.core.errors import ConfigError
+from swarmpose.detect.registry import make_detector
+from swarmpose.pipeline.backward import SETTLED_AGE, BackwardPass
+from swarmpose.pipeline.run import RunSummary, results, run_sequence
+from swarmpose.pipeline.step import FramePipeline
+from swarmpose.sim.people_metrics import TruePerson, score_people
+from swarmpose.sim.scoring import body_joints
+from swarmpose.sources.base import Frame
+from swarmpose.sources.groundtruth import load_ground_truth
+from swarmpose.sources.registry import open_source
+from swarmpose.tracking.body_tracker import BodyTracker
+from swarmpose.tracking.config import TrackerConfig
+
+SMALL = {"particles": 24, "generations": 24, "max_people": 1, "auto_height": False}
+
+
+@pytest.fixture(scope="module")
+def side_wave(tmp_path_factory) -> Path:
+    """20 frames of the built-in body waving, seen from the side (the start's far arm settles late)."""
+    out = tmp_path_factory.mktemp("side_wave")
+    assert main(["synth", "--motion", "builtin:wave", "--frames", "20", "--camera-yaw", "90", "--out", str(out),
+                 "--quiet"]) == 0
+    return out
+
+
+def _errors_mm(folder: Path, run) -> np.ndarray:
+    """Per frame, the mean 3D joint error (mm) of the first body against the ground truth."""
+    gt = load_ground_truth(folder)
+    return np.array([1000 * np.linalg.norm(r.bodies[0].joints3d - gt.joints3d[gt.row(r.index)], axis=1).mean()
+                     for r in run])
+
+
+def test_the_backward_pass_removes_the_starts_settling_from_a_side_view(side_wave):
+    forward = list(swarmpose.track(f"folder:{side_wave}", detector="simulated", **SMALL))
+    both = list(swarmpose.track(f"folder:{side_wave}", detector="simulated", backward=20, **SMALL))
+    assert [r.index for r in both] == list(range(20)) and all(r.bodies[0].state != "lost" for r in both)
+    ahead, behind = _errors_mm(side_wave, forward), _errors_mm(side_wave, both)
+    # measured: the forward track's first five frames 80.7 mm, its last five 53.3; backward 54.1
+    assert behind[:5].mean() <= ahead[:5].mean() - 10, (ahead[:5].mean(), behind[:5].mean())
+    assert behind[:5].mean() <= behind[-5:].mean() + 10
+    assert behind[-1] == ahead[-1]  # the window's last frame is the backward pass's start, kept as it was
+
+
+def test_each_window_is_the_tracker_run_backwards_from_the_windows_last_solution(side_wave):
+    """A backward pass made by hand with a BodyTracker on the source's frames and the forward
+    run's detections gives each frame's refit pose exactly."""
+    settings = {**SMALL, "particles": 12, "generations": 8}
+    frames = 11
+    forward = list(swarmpose.track(f"folder:{side_wave}", detector="simulated", frames=frames, **settings))
+    both = list(swarmpose.track(f"folder:{side_wave}", detector="simulated", frames=frames, backward=4, **settings))
+    assert [r.index for r in both] == list(range(frames))
+    config = TrackerConfig(**settings)
+    source = open_source(f"folder:{side_wave}")
+    seen = [f for f in source if isinstance(f, Frame)][:frames]
+    source.close()
+    body = load_body("builtin")
+    body = body if len(body.triangles) <= config.triangles else body.tracking_lod(config.triangles)
+    tracker = BodyTracker(body, seen[0].intrinsics, config)
+    for first, last in ((0, 3), (4, 7), (8, 10)):  # windows of 4 frames, the last one short
+        assert np.array_equal(both[last].bodies[0].pose, forward[last].bodies[0].pose)
+        tracker.reset()
+        start = forward[last].bodies[0].pose
+        tracker.previous, tracker.history, tracker.age = start.copy(), [start.copy()], SETTLED_AGE
+        for k in range(last - 1, first - 1, -1):
+            mine = tracker.step(seen[k], forward[k].bodies[0].detection)
+            assert np.allclose(both[k].bodies[0].pose, mine.pose, atol=1e-9), k
+            assert "backward" in both[k].timings_ms
+
+
+def test_with_several_people_each_id_is_refit_on_its_own_frames(tmp_path):
+    folder = synthesize_scene(tmp_path / "two", ("builtin:male:builtin:walk@-0.7,0.3",
+                                                  "builtin:female:builtin:wave@0.6,-0.6"), 6, seed=3)
+    settings = {"particles": 16, "generations": 12, "max_people": 3, "auto_height": False}
+    forward = list(swarmpose.track(f"folder:{folder}", detector="simulated", **settings))
+    both = list(swarmpose.track(f"folder:{folder}", detector="simulated", backward=6, **settings))
+    assert [[b.id for b in r.bodies] for r in both] == [[b.id for b in r.bodies] for r in forward]
+    refit = [not np.array_equal(a.pose, b.pose) for r, s in zip(forward[:-1], both[:-1])
+             for a, b in zip(r.bodies, s.bodies)]
+    assert sum(refit) >= len(refit) - 1  # every person's earlier frames were refit
+    gt = load_ground_truth(folder)
+    truth = {f: [TruePerson(p.id, p.joints3d, p.visible) for p in gt.people[gt.row(f)]] for f in gt.frames}
+    tracked = {r.index: {b.id: body_joints(b.to_message()) for b in r.bodies if b.state != "lost"} for r in both}
+    scores = score_people(truth, tracked)
+    assert scores["id_switches"] == 0 and scores["misses"] == 0
+    assert all(s["mpjpe_mm"] < 120 for s in scores["per_person"].values())
+
+
+def test_a_stopped_run_hands_on_the_frames_it_held(wave_sequence):
+    """A stop (SIGINT) ends the reading; the frames waiting for their backward pass still reach the sinks."""
+    stop = threading.Event()
+    source = open_source(f"folder:{wave_sequence}")
+
+    def stopping():
+        for item in source:
+            if item.index == 2:  # as a signal during frame 2's tracking
+                stop.set()
+            yield item
+
+    got = []
+
+    class Keep:
+        def frame(self, message, frame):
+            got.append(message["frame"])
+
+        def close(self):
+            pass
+
+    config = TrackerConfig(particles=12, generations=8, max_people=1, backward=10)
+    pipeline = FramePipeline(make_detector("simulated", source),
+                             lambda intr, body_id: BodyTracker(load_body("builtin"), intr, config, body_id=body_id),
+                             backward=config.backward)
+    summary = run_sequence(stopping(), pipeline, [Keep()], progress=False, stop=stop)
+    source.close()
+    assert got == [0, 1, 2] and summary.interrupted and summary.frames == 3
+
+
+def test_a_source_that_breaks_hands_on_the_frames_held_then_raises(wave_sequence):
+    source = open_source(f"folder:{wave_sequence}")
+
+    def breaking():
+        for item in source:
+            if item.index == 3:
+                raise OSError("the recording is truncated")
+            yield item
+
+    config = TrackerConfig(particles=12, generations=8, max_people=1, backward=10)
+    pipeline = FramePipeline(make_detector("simulated", source),
+                             lambda intr, body_id: BodyTracker(load_body("builtin"), intr, config, body_id=body_id),
+                             backward=config.backward)
+    got, summary = [], RunSummary()
+    with pytest.raises(OSError, match="truncated"):
+        for result in results(breaking(), pipeline, summary=summary):
+            got.append(result.index)
+    source.close()
+    assert got == [0, 1, 2] and summary.frames == 3
+
+
+@pytest.mark.parametrize("settings, words", [
+    ({"mode": "lift"}, "lift mode fits none"),
+    ({"smoothing": "one-euro"}, "choose one"),
+])
+def test_settings_the_backward_pass_cannot_serve_are_refused(settings, words):
+    with pytest.raises(ConfigError, match=words):
+        TrackerConfig(backward=5, **settings)
+
+
+def test_replay_and_the_frame_by_frame_tracker_refuse_it_and_name_what_to_run(wave_sequence, tmp_path, capsys):
+    assert main(["replay", str(wave_sequence), "--out", str(tmp_path), "--backward", "5", "-q"]) == 2
+    assert "swarmpose track" in capsys.readouterr().err
+    with swarmpose.Tracker("builtin", "simulated", source=open_source(f"folder:{wave_sequence}"),
+                           backward=5) as tracker:
+        with pytest.raises(ConfigError, match="swarmpose.track"):
+            tracker.track_frame(next(iter(open_source(f"folder:{wave_sequence}"))))
+
+
+def test_a_window_of_no_frames_is_refused():
+    with pytest.raises(ValueError, match="at least 1"):
+        BackwardPass(0)
