@@ -13,19 +13,29 @@ person's depth with the other people taken out, their detection), in reverse.
 
 Costs about twice the tracking time, and results come ``window`` frames late: offline only
 (``track``, ``eval``, :func:`swarmpose.pipeline.api.track`); ``serve`` and ``replay`` publish live.
-A frame the backward tracker loses keeps its forward fit. Frames are held in memory for a window
-(about 2 MB each at 640 x 480 with colour).
+A frame the backward tracker loses keeps its forward fit, and so do a person's frames whose
+backward run fails (logged) and the frames held when the run is stopped. Frames are held in memory
+for a window (about 2 MB each at 640 x 480 with colour, and a depth copy per person with several
+people).
 """
 
 from __future__ import annotations
 
+import logging
+import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
+from swarmpose.body.skinned import SkinnedBody
 from swarmpose.detect.joints import Joints2D
+from swarmpose.gpu.context import ClContext
 from swarmpose.sources.base import Frame
 from swarmpose.tracking.body_tracker import BodyTracker
+from swarmpose.tracking.config import TrackerConfig
 from swarmpose.tracking.result import BodyResult, FrameResult
+
+log = logging.getLogger(__name__)
 
 SETTLED_AGE = 8
 """The backward tracker starts as a track this many frames old: past the young re-checks of the
@@ -35,32 +45,54 @@ facing, not for a converged one."""
 
 @dataclass(frozen=True)
 class StepInput:
-    """What one person's forward tracker was given for one frame: its id then, the tracker, the
-    frame it saw (the other people's depth removed, where they were) and its 2D joints."""
+    """What one person's forward tracker was given for one frame, as it was then: the id, the body,
+    camera, settings and OpenCL context it tracked with, the frame it saw (the other people's depth
+    removed, where they were) and its 2D joints. (A tracker's body changes: a retired person's
+    tracker goes back to the start body, and a spare tracker takes on another id.)"""
 
     body_id: int
-    tracker: BodyTracker
+    body: SkinnedBody
+    tracker_config: TrackerConfig
+    context: ClContext
     frame: Frame
     joints: Joints2D | None
     others_removed: bool
 
 
+def person_steps(steps: Sequence[StepInput], results: Sequence[FrameResult]) -> dict[int, list[StepInput]]:
+    """Per body id, in frame order, the steps whose fit that id published in ``results``: one per
+    frame, the last for the id in that frame. A new person's tracker is tried under the next id on
+    each unexplained segment and let go when it finds nobody there, so a frame may hold steps for
+    an id that its result does not have, or before the step that gave the id its body."""
+    published = {r.index: {b.id for b in r.bodies} for r in results}
+    last: dict[tuple[int, int], StepInput] = {}
+    for step in steps:
+        if step.body_id in published.get(step.frame.index, ()):
+            last[(step.frame.index, step.body_id)] = step
+    out: dict[int, list[StepInput]] = {}
+    for (_, body_id), step in sorted(last.items()):
+        out.setdefault(body_id, []).append(step)
+    return out
+
+
 class BackwardPass:
     """Holds a run's frame results ``window`` frames and hands them on with each person's frames refit
     backwards (module doc). Use: :meth:`record` as every tracker's ``on_step``, :meth:`add` each
-    result in order, :meth:`finish` at the end (or when the run stops early)."""
+    result in order, :meth:`finish` at the end, :meth:`release` when the run stops or fails.
+    stop: an event that, once set, ends a backward run in progress (the rest keep their forward fits)."""
 
-    def __init__(self, window: int):
+    def __init__(self, window: int, stop: threading.Event | None = None):
         if window < 1:
             raise ValueError(f"a backward window of {window} frames; it needs at least 1")
-        self.window = int(window)
+        self.window, self.stop = int(window), stop
         self.results: list[FrameResult] = []
         self.steps: list[StepInput] = []
-        self._backward: dict[int, BodyTracker] = {}  # id(forward tracker) -> its backward tracker
+        self._tracker: BodyTracker | None = None  # the backward tracker, rebuilt for another camera or settings
 
     def record(self, tracker: BodyTracker, frame: Frame, joints: Joints2D | None, others_removed: bool) -> None:
         """A tracker's ``on_step``: keep its input for the backward pass."""
-        self.steps.append(StepInput(tracker.body_id, tracker, frame, joints, others_removed))
+        self.steps.append(StepInput(tracker.body_id, tracker.body, tracker.config, tracker.objective.scorer.cl_context,
+                                    frame, joints, others_removed))
 
     def add(self, result: FrameResult) -> list[FrameResult]:
         """Hold ``result``; the window's results, refit, once it holds ``window`` frames (else none)."""
@@ -72,68 +104,66 @@ class BackwardPass:
         return self.flush() if self.results else []
 
     def release(self) -> list[FrameResult]:
-        """The results still held as the forward pass left them (the run failed)."""
+        """The results still held as the forward pass left them (the run stopped or failed)."""
         out, self.results, self.steps = self.results, [], []
         return out
 
     def flush(self) -> list[FrameResult]:
         """Refit the held frames backwards per person and hand them on, in order."""
-        held = {r.index: i for i, r in enumerate(self.results)}
-        by_person: dict[int, list[StepInput]] = {}
-        for step in self.steps:
-            if step.frame.index in held:
-                by_person.setdefault(step.body_id, []).append(step)
         refit: dict[tuple[int, int], BodyResult] = {}
         spent_ms: dict[int, float] = {}
-        for body_id, steps in by_person.items():
-            self._refit_person(body_id, steps, held, refit, spent_ms)
+        for body_id, steps in person_steps(self.steps, self.results).items():
+            try:
+                self._refit_person(body_id, steps, refit, spent_ms)
+            except Exception as exc:  # that person keeps the forward fits of this window
+                log.warning("backward pass of person %d over frames %d-%d failed (%s: %s); their forward fits "
+                            "stand", body_id, steps[0].frame.index, steps[-1].frame.index, type(exc).__name__, exc)
         out = []
-        for result in self.results:
-            bodies = tuple(refit.get((result.index, b.id), b) for b in result.bodies)
+        for result in self.release():
             if result.index in spent_ms:
-                timings = {**result.timings_ms, "backward": spent_ms[result.index]}
-                result = replace(result, bodies=bodies, timings_ms=timings)
+                bodies = tuple(refit.get((result.index, b.id), b) for b in result.bodies)
+                people = None if result.people is None else {
+                    **result.people, "tracked": sum(b.state != "lost" for b in bodies)}
+                result = replace(result, bodies=bodies, people=people,
+                                 timings_ms={**result.timings_ms, "backward": spent_ms[result.index]})
             out.append(result)
-        self.results, self.steps = [], []
         return out
 
-    def _refit_person(self, body_id: int, steps: list[StepInput], held: dict[int, int],
-                      refit: dict[tuple[int, int], BodyResult], spent_ms: dict[int, float]) -> None:
-        """Run ``body_id``'s frames backwards from their last forward solution into ``refit``."""
+    def _refit_person(self, body_id: int, steps: list[StepInput], refit: dict[tuple[int, int], BodyResult],
+                      spent_ms: dict[int, float]) -> None:
+        """Run ``body_id``'s ``steps`` backwards from their last forward solution into ``refit``."""
+        held = {r.index: r for r in self.results}
         forward = {}
         for step in steps:
-            body = next((b for b in self.results[held[step.frame.index]].bodies if b.id == body_id), None)
-            if body is not None and body.state != "lost" and body.pose is not None:
+            body = next(b for b in held[step.frame.index].bodies if b.id == body_id)
+            if body.state != "lost" and body.pose is not None:
                 forward[step.frame.index] = body
-        last = max((k for k, s in enumerate(steps) if s.frame.index in forward), default=None)
-        if last is None or last == 0:
+        last = max((k for k, s in enumerate(steps) if s.frame.index in forward), default=0)
+        if last == 0:
             return
-        tracker = self._tracker_for(steps[last].tracker)
+        tracker = self._tracker_for(steps[last])
         start = forward[steps[last].frame.index].pose
         tracker.previous, tracker.history, tracker.age = start.copy(), [start.copy()], SETTLED_AGE
         tracker.body_id = body_id
         for step in reversed(steps[:last]):
+            if self.stop is not None and self.stop.is_set():
+                return
             t0 = time.perf_counter()
-            try:
-                body = tracker.step(step.frame, step.joints, step.others_removed)
-            except Exception:  # the forward fit stands; the backward track restarts on the frame before
-                tracker.reset()
-                continue
-            finally:
-                index = step.frame.index
-                spent_ms[index] = spent_ms.get(index, 0.0) + 1000 * (time.perf_counter() - t0)
+            body = tracker.step(step.frame, step.joints, step.others_removed)
+            index = step.frame.index
+            spent_ms[index] = spent_ms.get(index, 0.0) + 1000 * (time.perf_counter() - t0)
             if body.state != "lost":
-                reason = forward[step.frame.index].reason if step.frame.index in forward else body.reason
-                refit[(step.frame.index, body_id)] = replace(body, reason=reason)
+                refit[(index, body_id)] = replace(body, reason=forward[index].reason if index in forward
+                                                  else body.reason)
 
-    def _tracker_for(self, forward: BodyTracker) -> BodyTracker:
-        """The backward tracker of ``forward``: its settings, its body now, its OpenCL context."""
-        tracker = self._backward.get(id(forward))
-        if tracker is None:
-            context = forward.objective.scorer.cl_context
-            tracker = BodyTracker(forward.body, forward.intrinsics, forward.config, context=context)
-            self._backward[id(forward)] = tracker
-        elif tracker.body is not forward.body:
-            tracker.set_body(forward.body)
+    def _tracker_for(self, step: StepInput) -> BodyTracker:
+        """The backward tracker for ``step``'s camera, settings and body, its track forgotten."""
+        tracker = self._tracker
+        if (tracker is None or tracker.intrinsics != step.frame.intrinsics or tracker.config != step.tracker_config
+                or tracker.objective.scorer.cl_context is not step.context):
+            tracker = BodyTracker(step.body, step.frame.intrinsics, step.tracker_config, context=step.context)
+            self._tracker = tracker
+        elif tracker.body is not step.body:
+            tracker.set_body(step.body)
         tracker.reset()
         return tracker

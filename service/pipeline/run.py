@@ -67,17 +67,21 @@ class RunSummary:
 def results(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline, frames: int = 0,
             summary: RunSummary | None = None, stop: threading.Event | None = None) -> Iterator[FrameResult]:
     """The result of every item of ``source`` (at most ``frames``; 0 = all), counted in ``summary``.
-    No item is read past the ``frames``-th, nor after ``stop`` is set. With the pipeline's
-    ``backward`` window, each window's results come after its backward pass
-    (:mod:`swarmpose.pipeline.backward`), counted with its time; the last ones when the items end."""
+    No item is read past the ``frames``-th, nor once ``stop`` is set (``summary.interrupted``). With
+    the pipeline's ``backward`` window, each window's results come after its backward pass
+    (:mod:`swarmpose.pipeline.backward`), counted with its time; when the items end, the last ones;
+    when the run is stopped or fails, those held as the forward pass left them."""
     summary = summary if summary is not None else RunSummary()
-    refiner = BackwardPass(pipeline.backward) if pipeline.backward else None
+    refiner = BackwardPass(pipeline.backward, stop) if pipeline.backward else None
     if refiner is not None:
         pipeline.on_step = refiner.record
     seconds: dict[int, float] = {}  # the forward time of the results held for the backward pass
     items, read = iter(source), 0
     try:
-        while not (frames and read >= frames) and not (stop is not None and stop.is_set()):
+        while not (frames and read >= frames):
+            if stop is not None and stop.is_set():
+                summary.interrupted = True
+                break
             item = next(items, _END)
             if item is _END:
                 break
@@ -91,12 +95,13 @@ def results(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline, fra
                 continue
             seconds[result.index] = spent
             yield from _counted(refiner.add(result), seconds, summary)
+        if refiner is not None:
+            done = refiner.release() if summary.interrupted else refiner.finish()
+            yield from _counted(done, seconds, summary)
     except Exception:
         if refiner is not None:  # what was held goes out as the forward pass left it, then the error
             yield from _counted(refiner.release(), seconds, summary)
         raise
-    if refiner is not None:
-        yield from _counted(refiner.finish(), seconds, summary)
 
 
 def _counted(done: list[FrameResult], seconds: dict[int, float], summary: RunSummary) -> Iterator[FrameResult]:
@@ -111,7 +116,8 @@ def run_sequence(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline
                  stop: threading.Event | None = None) -> RunSummary:
     """Track ``source`` frame by frame, handing each frame message to ``sinks``; closes the sinks.
     ``stop`` (set from a signal handler) ends the run after the frame in progress, which every
-    sink gets, so the files hold the same frames."""
+    sink gets, so the files hold the same frames (with the backward pass, the frames it held go
+    out with their forward fits)."""
     summary = RunSummary()
     live = list(sinks)
     total = frames or getattr(source, "length", None) or None
@@ -130,7 +136,6 @@ def run_sequence(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline
                         summary.sink_errors.append(what)
                         live.remove(sink)
                 bar.update(1)
-        summary.interrupted = stop is not None and stop.is_set()  # results() read no further
         summary.source_error = "" if summary.interrupted else source_error(source)
         if summary.frames and not summary.tracked and summary.nobody_reason:
             log.warning("nobody was tracked in the %d frames read (%s); each frame's message says why",

@@ -73,7 +73,8 @@ class TrackerConfig:
                                "person's track is run backwards over them from its last solution, and those "
                                "frames get the backward fit, published this many frames late (a track's start "
                                "and a side view's limbs settle over frames, which the backward pass starts "
-                               "with); 0 = off. Not with serve or replay, nor with one-euro smoothing",
+                               "with); 0 = off. Not with serve, replay or Tracker.track_frame (live), the lift "
+                               "mode or one-euro smoothing",
                             minimum=0)
     auto_height: bool = setting(True, "a body whose shape is not given (no --shape, not a .glb) is scaled to each "
                                       "person's height, measured on the depth of their first upright frames")

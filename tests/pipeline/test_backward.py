@@ -16,7 +16,7 @@ from swarmpose.body.loader import load_body
 from swarmpose.cli.main import main
 from swarmpose.core.errors import ConfigError
 from swarmpose.detect.registry import make_detector
-from swarmpose.pipeline.backward import SETTLED_AGE, BackwardPass
+from swarmpose.pipeline.backward import SETTLED_AGE, BackwardPass, StepInput, person_steps
 from swarmpose.pipeline.run import RunSummary, results, run_sequence
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.sim.people_metrics import TruePerson, score_people
@@ -26,6 +26,7 @@ from swarmpose.sources.groundtruth import load_ground_truth
 from swarmpose.sources.registry import open_source
 from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.config import TrackerConfig
+from swarmpose.tracking.result import BodyResult, FrameResult
 
 SMALL = {"particles": 24, "generations": 24, "max_people": 1, "auto_height": False}
 
@@ -102,7 +103,8 @@ def test_with_several_people_each_id_is_refit_on_its_own_frames(tmp_path):
 
 
 def test_a_stopped_run_hands_on_the_frames_it_held(wave_sequence):
-    """A stop (SIGINT) ends the reading; the frames waiting for their backward pass still reach the sinks."""
+    """A stop (SIGINT) ends the reading; the frames waiting for their backward pass reach the sinks
+    at once, as the forward pass left them."""
     stop = threading.Event()
     source = open_source(f"folder:{wave_sequence}")
 
@@ -116,7 +118,7 @@ def test_a_stopped_run_hands_on_the_frames_it_held(wave_sequence):
 
     class Keep:
         def frame(self, message, frame):
-            got.append(message["frame"])
+            got.append(message)
 
         def close(self):
             pass
@@ -127,7 +129,8 @@ def test_a_stopped_run_hands_on_the_frames_it_held(wave_sequence):
                              backward=config.backward)
     summary = run_sequence(stopping(), pipeline, [Keep()], progress=False, stop=stop)
     source.close()
-    assert got == [0, 1, 2] and summary.interrupted and summary.frames == 3
+    assert [m["frame"] for m in got] == [0, 1, 2] and summary.interrupted and summary.frames == 3
+    assert all("backward" not in m["timings_ms"] for m in got)  # promptly: with their forward fits
 
 
 def test_a_source_that_breaks_hands_on_the_frames_held_then_raises(wave_sequence):
@@ -163,12 +166,57 @@ def test_settings_the_backward_pass_cannot_serve_are_refused(settings, words):
 def test_replay_and_the_frame_by_frame_tracker_refuse_it_and_name_what_to_run(wave_sequence, tmp_path, capsys):
     assert main(["replay", str(wave_sequence), "--out", str(tmp_path), "--backward", "5", "-q"]) == 2
     assert "swarmpose track" in capsys.readouterr().err
-    with swarmpose.Tracker("builtin", "simulated", source=open_source(f"folder:{wave_sequence}"),
-                           backward=5) as tracker:
+    source = open_source(f"folder:{wave_sequence}")
+    with swarmpose.Tracker("builtin", "simulated", source=source, backward=5) as tracker:
         with pytest.raises(ConfigError, match="swarmpose.track"):
-            tracker.track_frame(next(iter(open_source(f"folder:{wave_sequence}"))))
+            tracker.track_frame(next(iter(source)))
+    source.close()
 
 
 def test_a_window_of_no_frames_is_refused():
     with pytest.raises(ValueError, match="at least 1"):
         BackwardPass(0)
+
+
+def _step(frame_index: int, body_id: int, note: str) -> StepInput:
+    frame = Frame(frame_index, 0, np.zeros((2, 2), np.float32), None, None)
+    return StepInput(body_id, None, None, None, frame, note, False)
+
+
+def _frame_with(index: int, *ids: int) -> FrameResult:
+    bodies = tuple(BodyResult(i, "tracking", "", np.zeros(36), np.zeros((14, 3)), np.zeros((14, 2)), np.zeros(14))
+                   for i in ids)
+    return FrameResult(index, 0, bodies)
+
+
+def test_each_id_is_refit_on_the_steps_whose_fit_it_published():
+    """A new person's tracker is tried under the next id on each unexplained segment and let go when
+    it finds nobody: those steps carry an id they never published (frame 0, id 2), or come before
+    the step that gave the id its fit in the same frame (frame 1, id 2: the larger segment is tried
+    first). Only the last step of an id in a frame it published is refit."""
+    steps = [_step(0, 1, "person 1"), _step(0, 2, "nobody"),
+             _step(1, 1, "person 1"), _step(1, 2, "a larger segment, nobody"), _step(1, 2, "person 2"),
+             _step(2, 1, "person 1"), _step(2, 2, "person 2"), _step(2, 3, "nobody")]
+    held = [_frame_with(0, 1), _frame_with(1, 1, 2), _frame_with(2, 1, 2)]
+    chosen = person_steps(steps, held)
+    assert {k: [(s.frame.index, s.joints) for s in v] for k, v in chosen.items()} == {
+        1: [(0, "person 1"), (1, "person 1"), (2, "person 1")], 2: [(1, "person 2"), (2, "person 2")]}
+
+
+def test_a_step_keeps_the_body_its_tracker_had_then(wave_sequence):
+    """A retired person's tracker goes back to its start body (``new_person``) before the window's
+    backward pass: the step recorded the scaled body the person was tracked with."""
+    from swarmpose.tracking.auto_height import HeightFittingTracker, scaled_body
+
+    source = open_source(f"folder:{wave_sequence}")
+    frame = next(iter(source))
+    source.close()
+    tracker = HeightFittingTracker(load_body("builtin"), frame.intrinsics, TrackerConfig(particles=8, generations=4))
+    tracker.factor = 1.1  # as its height measure does
+    tracker.set_body(scaled_body(tracker.given_body, tracker.factor))
+    held = BackwardPass(5)
+    held.record(tracker, frame, None, False)
+    tracked_with = tracker.body
+    tracker.new_person()
+    assert tracker.body is tracker.given_body and held.steps[0].body is tracked_with
+    assert held.steps[0].body.height == pytest.approx(1.1 * tracker.given_body.height, rel=1e-6)
