@@ -114,7 +114,7 @@ class BackwardPass:
         spent_ms: dict[int, float] = {}
         for body_id, steps in person_steps(self.steps, self.results).items():
             try:
-                self._refit_person(body_id, steps, refit, spent_ms)
+                refit.update(self._refit_person(body_id, steps, spent_ms))
             except Exception as exc:  # that person keeps the forward fits of this window
                 log.warning("backward pass of person %d over frames %d-%d failed (%s: %s); their forward fits "
                             "stand", body_id, steps[0].frame.index, steps[-1].frame.index, type(exc).__name__, exc)
@@ -129,9 +129,11 @@ class BackwardPass:
             out.append(result)
         return out
 
-    def _refit_person(self, body_id: int, steps: list[StepInput], refit: dict[tuple[int, int], BodyResult],
-                      spent_ms: dict[int, float]) -> None:
-        """Run ``body_id``'s ``steps`` backwards from their last forward solution into ``refit``."""
+    def _refit_person(self, body_id: int, steps: list[StepInput],
+                      spent_ms: dict[int, float]) -> dict[tuple[int, int], BodyResult]:
+        """``body_id``'s ``steps`` run backwards from their last forward solution: the fits by (frame
+        index, id) of the frames it did not lose; the time spent per frame added to ``spent_ms``."""
+        refit: dict[tuple[int, int], BodyResult] = {}
         held = {r.index: r for r in self.results}
         forward = {}
         for step in steps:
@@ -140,14 +142,14 @@ class BackwardPass:
                 forward[step.frame.index] = body
         last = max((k for k, s in enumerate(steps) if s.frame.index in forward), default=0)
         if last == 0:
-            return
+            return refit
         tracker = self._tracker_for(steps[last])
         start = forward[steps[last].frame.index].pose
         tracker.previous, tracker.history, tracker.age = start.copy(), [start.copy()], SETTLED_AGE
         tracker.body_id = body_id
         for step in reversed(steps[:last]):
             if self.stop is not None and self.stop.is_set():
-                return
+                break
             t0 = time.perf_counter()
             body = tracker.step(step.frame, step.joints, step.others_removed)
             index = step.frame.index
@@ -155,6 +157,7 @@ class BackwardPass:
             if body.state != "lost":
                 refit[(index, body_id)] = replace(body, reason=forward[index].reason if index in forward
                                                   else body.reason)
+        return refit
 
     def _tracker_for(self, step: StepInput) -> BodyTracker:
         """The backward tracker for ``step``'s camera, settings and body, its track forgotten."""

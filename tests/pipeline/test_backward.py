@@ -220,3 +220,26 @@ def test_a_step_keeps_the_body_its_tracker_had_then(wave_sequence):
     tracker.new_person()
     assert tracker.body is tracker.given_body and held.steps[0].body is tracked_with
     assert held.steps[0].body.height == pytest.approx(1.1 * tracker.given_body.height, rel=1e-6)
+
+
+def test_a_person_whose_backward_run_fails_keeps_the_forward_fits_and_it_is_logged(wave_sequence, caplog):
+    from dataclasses import replace
+
+    source = open_source(f"folder:{wave_sequence}")
+    config = TrackerConfig(particles=12, generations=8, max_people=1, backward=3)
+    pipeline = FramePipeline(make_detector("simulated", source),
+                             lambda intr, body_id: BodyTracker(load_body("builtin"), intr, config, body_id=body_id),
+                             backward=config.backward)
+    held = BackwardPass(config.backward)
+    pipeline.on_step = held.record
+    forward = [pipeline.process(item) for item, _ in zip(source, range(3))]
+    source.close()
+    for result in forward:
+        held.results.append(result)
+    broken = held.steps[0].frame
+    held.steps[0] = replace(held.steps[0], frame=replace(broken, depth=broken.depth[:-1]))  # a row short
+    with caplog.at_level("WARNING", logger="swarmpose"):
+        out = held.flush()
+    assert [r.index for r in out] == [0, 1, 2]
+    assert all(np.array_equal(a.bodies[0].pose, b.bodies[0].pose) for a, b in zip(out, forward))
+    assert "backward pass of person 0 over frames 0-2 failed" in caplog.text
