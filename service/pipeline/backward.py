@@ -16,7 +16,8 @@ Costs about twice the tracking time, and results come ``window`` frames late: of
 A frame the backward tracker loses keeps its forward fit, and so do a person's frames whose
 backward run fails (logged) and the frames held when the run is stopped. Frames are held in memory
 for a window (about 2 MB each at 640 x 480 with colour, and a depth copy per person with several
-people).
+people). A limit: a person whose id is retired before their frames leave the window has a BVH
+file (``--out``) written with the start body, since the sink asks for the id's body then.
 """
 
 from __future__ import annotations
