@@ -113,9 +113,10 @@ class BackwardPass:
         """Refit the held frames backwards per person and hand them on, in order."""
         refit: dict[tuple[int, int], BodyResult] = {}
         spent_ms: dict[int, float] = {}
+        held = {r.index: r for r in self.results}
         for body_id, steps in person_steps(self.steps, self.results).items():
             try:
-                refit.update(self._refit_person(body_id, steps, spent_ms))
+                refit.update(self._refit_person(body_id, steps, held, spent_ms))
             except Exception as exc:  # that person keeps the forward fits of this window
                 log.warning("backward pass of person %d over frames %d-%d failed (%s: %s); their forward fits "
                             "stand", body_id, steps[0].frame.index, steps[-1].frame.index, type(exc).__name__, exc)
@@ -130,12 +131,12 @@ class BackwardPass:
             out.append(result)
         return out
 
-    def _refit_person(self, body_id: int, steps: list[StepInput],
+    def _refit_person(self, body_id: int, steps: list[StepInput], held: dict[int, FrameResult],
                       spent_ms: dict[int, float]) -> dict[tuple[int, int], BodyResult]:
-        """``body_id``'s ``steps`` run backwards from their last forward solution: the fits by (frame
-        index, id) of the frames it did not lose; the time spent per frame added to ``spent_ms``."""
+        """``body_id``'s ``steps`` run backwards from their last forward solution (``held``: the
+        window's results by frame index): the fits by (frame index, id) of the frames it did not
+        lose; the time spent per frame added to ``spent_ms``."""
         refit: dict[tuple[int, int], BodyResult] = {}
-        held = {r.index: r for r in self.results}
         forward = {}
         for step in steps:
             body = next(b for b in held[step.frame.index].bodies if b.id == body_id)

@@ -75,7 +75,7 @@ def results(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline, fra
     refiner = BackwardPass(pipeline.backward, stop) if pipeline.backward else None
     if refiner is not None:
         pipeline.on_step = refiner.record
-    seconds: dict[int, float] = {}  # the forward time of the results held for the backward pass
+    seconds: dict[int, float] = {}  # each result's forward time until it is counted
     items, read = iter(source), 0
     try:
         while not (frames and read >= frames):
@@ -88,13 +88,8 @@ def results(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline, fra
             read += 1
             t0 = time.perf_counter()
             result = pipeline.process(item)
-            spent = 0.0 if result.skipped else time.perf_counter() - t0
-            if refiner is None:
-                summary.count(result, spent)
-                yield result
-                continue
-            seconds[result.index] = spent
-            yield from _counted(refiner.add(result), seconds, summary)
+            seconds[result.index] = 0.0 if result.skipped else time.perf_counter() - t0
+            yield from _counted([result] if refiner is None else refiner.add(result), seconds, summary)
         if refiner is not None:
             done = refiner.release() if summary.interrupted else refiner.finish()
             yield from _counted(done, seconds, summary)
@@ -105,7 +100,8 @@ def results(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline, fra
 
 
 def _counted(done: list[FrameResult], seconds: dict[int, float], summary: RunSummary) -> Iterator[FrameResult]:
-    """``done`` (results after the backward pass) counted in ``summary`` with both passes' time."""
+    """``done`` (results handed on, after the backward pass if any) counted in ``summary`` with
+    their forward time from ``seconds`` and their backward time."""
     for result in done:
         summary.count(result, seconds.pop(result.index, 0.0) + result.timings_ms.get("backward", 0.0) / 1000)
         yield result
