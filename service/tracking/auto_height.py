@@ -53,7 +53,6 @@ from dataclasses import replace
 
 import numpy as np
 
-from swarmpose.body.kinematics import quaternion_to_matrix
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.detect.joints import Joints2D
@@ -62,7 +61,7 @@ from swarmpose.sources.base import Frame
 from swarmpose.tracking.body_tracker import BodyTracker, observed_depth
 from swarmpose.tracking.config import TrackerConfig
 from swarmpose.tracking.result import BodyResult
-from swarmpose.tracking.stature import lifted_upright, person_stature, upright
+from swarmpose.tracking.stature import upright_stature
 
 log = logging.getLogger(__name__)
 
@@ -127,9 +126,11 @@ class HeightFittingTracker(BodyTracker):
         result = super().step(frame, joints, others_removed)
         found = result.found
         if not self.locked and found.state != "lost" and found.pose is not None:
+            targets = self.objective.targets if self.objective is not None else None
             try:
-                stature = (person_stature(self.body, found.pose, observed_depth(frame.depth), self.intrinsics)
-                           if self._upright(found.pose) else None)
+                stature = (None if targets is None else
+                           upright_stature(self.body, found.pose, observed_depth(frame.depth), self.intrinsics,
+                                           targets.names, targets.xyz))
             except Exception as exc:  # a failed measure must not cost the frame its fit
                 log.debug("frame %d: body %d: no height measure (%s: %s)", frame.index, self.body_id,
                           type(exc).__name__, exc)
@@ -139,13 +140,6 @@ class HeightFittingTracker(BodyTracker):
                 if len(self.factors) in (FIRST_ESTIMATES, ESTIMATES):
                     self._rescale()
         return result
-
-    def _upright(self, pose: np.ndarray) -> bool:
-        """Whether the fitted ``pose`` (36,) and the frame's lifted joints both stand upright."""
-        if not upright(self.body, pose) or self.objective is None:
-            return False
-        targets = self.objective.targets
-        return lifted_upright(targets.names, targets.xyz, quaternion_to_matrix(np.asarray(pose, float)[3:7])[:, 1])
 
     def _rescale(self) -> None:
         """Scale the given body by the median factor so far (clamped); lock it after :data:`ESTIMATES`."""

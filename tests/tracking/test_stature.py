@@ -1,7 +1,7 @@
 """The stature measure of the automatic height (:mod:`swarmpose.tracking.stature`): the upright
 tests by hand, and the stature against ray-cast (Open3D) subjects of known height alone, on a
-floor before a wall, beside a tilted plate, with a hand over or on the head, and cut off by the
-image's border."""
+floor before a wall (near, and 5.5 m away with the simulator's depth noise), beside a tilted plate,
+with a hand over or on the head, and cut off by the image's border."""
 
 from __future__ import annotations
 
@@ -46,7 +46,7 @@ def test_upright_by_hand():
 def test_lifted_upright_by_hand():
     """Lifted joints (camera axes, y down) of a person standing, seated facing the camera (thighs
     pointing at it) and squatting; only the standing one is upright; a leg without depth does
-    not count."""
+    not count; a knee bent beyond ``max_bend_rad`` does not either, where that is asked."""
     up = np.array([0.0, -1.0, 0.0])
     names = ("left_hip", "left_knee", "left_ankle", "right_hip", "right_knee", "right_ankle")
     standing = np.array([[0.1, 0.0, 3.0], [0.1, 0.45, 3.0], [0.1, 0.88, 3.05],
@@ -61,12 +61,22 @@ def test_lifted_upright_by_hand():
     no_depth = standing.copy()
     no_depth[[1, 4]] = np.nan  # both knees without depth
     assert not lifted_upright(names, no_depth, up)
+    # knees forward by 0.2 m over 0.45 m thighs: thighs and shins 24-25 degrees off the vertical (within
+    # 34), the knees bent by 49 (beyond the 26 the fitted pose's test allows): upright unless the
+    # bend is bounded
+    flexed = standing.copy()
+    flexed[[1, 4], 2] -= 0.2
+    flexed[[2, 5], 2] = flexed[[0, 3], 2]
+    assert lifted_upright(names, flexed, up)
+    assert not lifted_upright(names, flexed, up, max_bend_rad=stature.UPRIGHT_MAX_RAD)
+    assert lifted_upright(names, standing, up, max_bend_rad=stature.UPRIGHT_MAX_RAD)
 
 
-def _scene_depth(subject, pose: np.ndarray, wall_m: float | None, plate: bool = False) -> np.ndarray:
-    """(H, W) m: ``subject`` at ``pose`` ray-cast by Open3D, with a floor under its soles and a
-    wall ``wall_m`` behind it (None: the person alone, as on background-free depth; 0: no hit);
-    ``plate``: a 35 x 60 cm plate tilted by 25 degrees beside the feet instead."""
+def _scene_depth(subject, pose: np.ndarray, wall_m: float | None, plate: bool = False,
+                 camera: Intrinsics = K) -> np.ndarray:
+    """(H, W) m: ``subject`` at ``pose`` ray-cast by Open3D through ``camera``, with a floor under
+    its soles and a wall ``wall_m`` behind it (None: the person alone, as on background-free depth;
+    0: no hit); ``plate``: a 35 x 60 cm plate tilted by 25 degrees beside the feet instead."""
     import open3d as o3d
 
     verts = subject.pose(pose[None], "dqs")[0]
@@ -87,8 +97,8 @@ def _scene_depth(subject, pose: np.ndarray, wall_m: float | None, plate: bool = 
     scene = o3d.t.geometry.RaycastingScene()
     for v, t in meshes:
         scene.add_triangles(o3d.core.Tensor(np.asarray(v, np.float32)), o3d.core.Tensor(np.asarray(t, np.uint32)))
-    cols, rows = np.meshgrid(np.arange(K.width) + 0.0, np.arange(K.height) + 0.0)
-    dirs = np.stack([(cols - K.cx) / K.fx, (rows - K.cy) / K.fy, np.ones_like(cols)], -1)
+    cols, rows = np.meshgrid(np.arange(camera.width) + 0.0, np.arange(camera.height) + 0.0)
+    dirs = np.stack([(cols - camera.cx) / camera.fx, (rows - camera.cy) / camera.fy, np.ones_like(cols)], -1)
     rays = np.concatenate([np.zeros_like(dirs), dirs], -1).astype(np.float32)
     hit = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()  # along rays of unit z: the depth
     return np.where(np.isfinite(hit), hit, 0.0).astype(np.float32)
@@ -188,6 +198,31 @@ def test_a_few_flat_pixels_beside_the_feet_are_no_floor():
         patch.setattr(stature, "FLOOR_MAX_TILT_RAD", np.pi)
         patch.setattr(stature, "FLOOR_BELOW_FEET_M", (np.inf, np.inf))
         assert abs(person_stature(body, pose, depth, K) / subject.height - 1) > 0.03
+
+
+@pytest.mark.parametrize("height", [1.50, 1.95])
+def test_at_range_the_floor_is_found_among_noisy_pixels(height):
+    """Oracle: a built-in subject 5.5 m away on a floor 0.8 m before a wall, ray-cast (Open3D) at
+    640 x 480 with the simulator's Kinect noise (three seeds): there the noise turns the floor's
+    normals every way, and the floor is fitted among all the low pixels around the feet. The
+    median stature is the subject's within 1 %; the control, which looks for the floor among
+    flat pixels only and so takes the soles among noisy floor points, is more than 1.5 % tall."""
+    from dataclasses import replace
+
+    from swarmpose.sim.depth_noise import KinectNoise
+
+    camera = replace(K, width=640, height=480, fx=525.0, fy=525.0, cx=319.5, cy=239.5)
+    body = load_body("builtin").tracking_lod(1500)
+    subject = load_body("builtin", f"height={height}")
+    pose = body.rest_pose(translation=(0.0, 0.1, 5.5), quaternion=FACING)
+    clean = _scene_depth(subject, pose, 0.8, camera=camera)
+    noisy = [KinectNoise().apply(clean, np.random.default_rng(seed)) for seed in range(3)]
+    measured = np.median([person_stature(body, pose, depth, camera) for depth in noisy])
+    assert measured == pytest.approx(subject.height, rel=0.01)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(stature, "FLAT_PIXELS", 0)
+        control = np.median([person_stature(body, pose, depth, camera) for depth in noisy])
+    assert control > 1.015 * subject.height
 
 
 def test_no_stature_without_a_person_in_the_depth():
