@@ -77,8 +77,15 @@ FLOOR_PIXELS = 100
 """... and seen when at least this many flat pixels outside the model's render lie there ..."""
 FLAT_PIXELS = FLOOR_PIXELS
 """... or, where fewer of them are flat, among all the pixels outside the render there: at range
-the depth noise turns a floor's normals every way (simulated Kinect noise, 5-5.5 m: 3-9 flat pixels
-of 250-510; without a floor the soles were taken among noisy floor points, +1.5 to +2.7 %)."""
+the depth noise turns a floor's normals every way (simulated Kinect noise at 640 x 480, from
+about 4 m; at 5-5.5 m 3-9 flat pixels of 250-510; without a floor the soles were taken among noisy
+floor points, +1.5 to +2.7 %) ..."""
+FALLBACK_MAX_TILT_RAD = 0.15
+"""... and then a floor only within this (rad, about 9 degrees) of lying across the fitted body's
+long axis (:func:`long_axis`; the fitted pelvis's leans too much: at 5 m it missed a true floor):
+without the flat test, a fit whose feet miss the person's leaves their shoes and shins outside the
+render, and a plane through them tilts by 15-19 degrees (ray-cast subjects alone; a true floor at
+3.2-5.5 m with noise: 0-1 degree)."""
 FLOOR_INLIER_M = 0.02
 """... within this (m) of the RANSAC plane through them ..."""
 FLOOR_RANSAC_ITERATIONS = 100
@@ -178,12 +185,13 @@ def facing_along(points: np.ndarray, axis: np.ndarray, max_rad: float = FLAT_MAX
 
 
 def floor_plane(points: np.ndarray, up: np.ndarray, mask: np.ndarray, hit: np.ndarray,
-                flat: np.ndarray) -> tuple[np.ndarray, float] | None:
+                flat: np.ndarray, standing: np.ndarray | None = None) -> tuple[np.ndarray, float] | None:
     """The floor under the person, None when none is seen: (unit normal (3,) on the side of ``up``,
     level: the normal's dot product with the floor's points, m). Its points are the flat pixels
     (``flat``) of ``mask`` outside the model's render ``hit`` in the lowest :data:`FLOOR_SHARE` of
     the person's extent along ``up`` (all those pixels where fewer than :data:`FLAT_PIXELS` are
-    flat: noisy depth at range); the plane is the RANSAC plane among them
+    flat: noisy depth at range, the plane then held to :data:`FALLBACK_MAX_TILT_RAD` of the fitted
+    body's ``standing`` axis (3,), by default ``up``); the plane is the RANSAC plane among them
     (:func:`ransac_plane_inliers`: the tops of shoes beside the model are flat too) refitted by
     least squares (SVD) to its inliers, at least :data:`FLOOR_PIXELS` of them, and a floor only
     when it is within :data:`FLOOR_MAX_TILT_RAD` of lying across ``up``."""
@@ -191,8 +199,10 @@ def floor_plane(points: np.ndarray, up: np.ndarray, mask: np.ndarray, hit: np.nd
     low, high = np.percentile(along[mask], PERCENTILES)
     low_around = mask & ~hit & (along < low + FLOOR_SHARE * (high - low))
     floor = low_around & flat
+    max_tilt, across = FLOOR_MAX_TILT_RAD, up
     if floor.sum() < FLAT_PIXELS:
-        floor = low_around
+        floor, max_tilt = low_around, FALLBACK_MAX_TILT_RAD
+        across = up if standing is None else standing
     if floor.sum() < FLOOR_PIXELS:
         return None
     on = ransac_plane_inliers(points[floor], FLOOR_INLIER_M, FLOOR_RANSAC_ITERATIONS)
@@ -201,7 +211,7 @@ def floor_plane(points: np.ndarray, up: np.ndarray, mask: np.ndarray, hit: np.nd
     normal, offset = plane_fit(on)
     if normal @ up <= 0:
         normal, offset = -normal, -offset
-    if _angle(normal, up) > FLOOR_MAX_TILT_RAD:  # a few flat pixels that are no floor (shoes, noise)
+    if _angle(normal, across) > max_tilt:  # a few flat pixels that are no floor (shoes, noise)
         return None
     return normal, -offset
 
@@ -279,8 +289,8 @@ def person_stature(body: SkinnedBody, pose: np.ndarray, depth: np.ndarray, intri
         return None
     seen = replace(intrinsics, width=window.tw, height=window.th, cx=intrinsics.cx - u0,
                    cy=intrinsics.cy - v0).point_map(depth)  # the window as a camera of its own
-    floor = floor_plane(seen, up, mask, hit, facing_along(seen, up))
     standing = long_axis(marks, up)  # the axis wherever no floor stands under the feet
+    floor = floor_plane(seen, up, mask, hit, facing_along(seen, up), standing)
     axis = standing if floor is None else floor[0]
     rows = np.nonzero(mask)[0] + v0
     person = seen[mask]

@@ -195,6 +195,7 @@ def test_a_few_flat_pixels_beside_the_feet_are_no_floor():
     assert person_stature(body, pose, depth, K) == pytest.approx(subject.height, rel=0.025)
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(stature, "FLOOR_PIXELS", 10)
+        patch.setattr(stature, "FLAT_PIXELS", 10)
         patch.setattr(stature, "FLOOR_MAX_TILT_RAD", np.pi)
         patch.setattr(stature, "FLOOR_BELOW_FEET_M", (np.inf, np.inf))
         assert abs(person_stature(body, pose, depth, K) / subject.height - 1) > 0.03
@@ -223,6 +224,30 @@ def test_at_range_the_floor_is_found_among_noisy_pixels(height):
         patch.setattr(stature, "FLAT_PIXELS", 0)
         control = np.median([person_stature(body, pose, depth, camera) for depth in noisy])
     assert control > 1.015 * subject.height
+
+
+def test_without_a_floor_a_fit_whose_feet_miss_the_persons_finds_none():
+    """A 1.50 m built-in subject alone (no floor, as on background-free depth) at 2.5 m, 640 x 480,
+    seen by the 1.75 m body at the same root: the model's feet lie below the person's, whose shoes
+    and shins are left outside the render, few of them flat. No floor is found among them and the
+    stature is the subject's within 2.5 %; the control, which lets that fallback plane tilt as far
+    as a flat floor may (20 degrees), takes the shoes for a floor and measures over 5 % short."""
+    from dataclasses import replace
+
+    camera = replace(K, width=640, height=480, fx=525.0, fy=525.0, cx=319.5, cy=239.5)
+    body = load_body("builtin").tracking_lod(1500)
+    subject = load_body("builtin", "height=1.50")
+    pose = body.rest_pose(translation=(0.0, 0.1, 2.5), quaternion=FACING)
+    depth = _scene_depth(subject, pose, None, camera=camera)
+    floors = []
+    real = stature.floor_plane
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(stature, "floor_plane", lambda *a: floors.append(real(*a)) or floors[-1])
+        assert person_stature(body, pose, depth, camera) == pytest.approx(subject.height, rel=0.025)
+    assert floors == [None]
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(stature, "FALLBACK_MAX_TILT_RAD", stature.FLOOR_MAX_TILT_RAD)
+        assert person_stature(body, pose, depth, camera) < 0.95 * subject.height
 
 
 def test_no_stature_without_a_person_in_the_depth():
