@@ -272,7 +272,7 @@ class BuiltinSpace(ShapeSpace):
         return replace(lod, name=f"builtin:{self.shape_spec(x)}@{len(lod.triangles)}",
                        vertices=model.deform(g) * s, bone_heads=heads, bind_matrices=body_frame_bind_matrices(heads),
                        point_rest=(lod.point_rest + np.tensordot(g, model.points, 1)) * s,
-                       metadata={**lod.metadata, "shape": asdict(self.body_shape(x))})
+                       metadata={**lod.metadata, "shape": asdict(self.body_shape(x)), "full_height_m": float(stature)})
 
     def body_spec(self) -> str:
         return "builtin"

@@ -73,7 +73,8 @@ class ShapeSpace(ABC):
 
     def fitting_body(self, x) -> SkinnedBody:
         """The body of ``x`` a shape fit scores (same topology for every x); here the tracking body,
-        see the module docstring for the spaces that do better."""
+        see the module docstring for the spaces that do better. A space whose full body's height
+        differs from this body's puts it in the metadata as ``full_height_m``."""
         return self.tracking_body(x)
 
     def clip(self, x) -> np.ndarray:
@@ -159,9 +160,12 @@ class MakeHumanSpace(ShapeSpace):
         return self._lod.follow(self.full_body(x))
 
     def fitting_body(self, x) -> SkinnedBody:
-        """The tracking body of ``x`` enclosing the full body's volume (:func:`match_volume`)."""
+        """The tracking body of ``x`` enclosing the full body's volume (:func:`match_volume`); its
+        metadata's ``full_height_m`` is the full body's rest height (the tracking mesh's is 2-5 mm
+        less)."""
         full = self.full_body(x)
-        return match_volume(self._lod.follow(full), full)
+        body = match_volume(self._lod.follow(full), full)
+        return replace(body, metadata={**body.metadata, "full_height_m": full.height})
 
     def body_spec(self) -> str:
         return f"makehuman:{self.directory}"

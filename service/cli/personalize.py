@@ -36,7 +36,8 @@ def cmd_personalize(args: argparse.Namespace) -> int:
     fit = result.fit
     measures = body_measures(fit.body)
     summary = {"body": result.space.body_spec(), "shape": result.space.shape_spec(fit.x),
-               "parameters": fit.parameters, **measures, "frames_read": result.frames_read,
+               "parameters": fit.parameters, **measures, "stature_measured_m": _rounded(fit.stature_m),
+               "stature_frames": fit.stature_frames, "frames_read": result.frames_read,
                "frames_tracked": len(result.samples), "keyframes": len(fit.keyframes),
                "seconds": round(fit.seconds, 1), "source": config.source, "detector": config.detector}
     body = replace(fit.body, name=f"personalised:{out.stem}",
@@ -49,9 +50,15 @@ def cmd_personalize(args: argparse.Namespace) -> int:
         print(f"{config.source}: {summary['frames_tracked']} of {summary['frames_read']} frames tracked, "
               f"{summary['keyframes']} key frames, {summary['seconds']} s")
         print(f"  {result.space.kind} parameters: {params}")
-        print(f"  height {measures['height_m']:.3f} m, volume {measures['volume_l']:.1f} l")
+        print(f"  height {measures['height_m']:.3f} m, volume {measures['volume_l']:.1f} l"
+              + ("" if fit.stature_m is None else
+                 f" (stature measured on the depth: {fit.stature_m:.3f} m over {fit.stature_frames} upright frames)"))
         print(f"  wrote {summary['out']} (use it with --body {summary['out']})")
     return 0
+
+
+def _rounded(value: float | None) -> float | None:
+    return None if value is None else round(value, 4)
 
 
 def add_personalize_command(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:

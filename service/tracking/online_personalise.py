@@ -93,8 +93,9 @@ class PersonalisingTracker(BodyTracker):
         else:
             self.found = found
             self.state = "locked"
-            log.info("body %d: shape locked after %.1f s: %s (height %.3f m)", self.body_id, fit.seconds,
-                     self.found["shape"], self.found["height_m"])
+            log.info("body %d: shape locked after %.1f s: %s (height %.3f m; stature measured on the depth: %s)",
+                     self.body_id, fit.seconds, self.found["shape"], self.found["height_m"],
+                     "none" if fit.stature_m is None else f"{fit.stature_m:.3f} m")
         finally:
             self.samples = []
 

@@ -8,7 +8,9 @@ shape space's start body). :func:`fit_shape` chooses ``keyframes`` well-spread f
 1. **Shape step.** A PSO over the space's parameters (:class:`~swarmpose.body.shape_space.ShapeSpace`)
    with the poses held, minimising the mean over the key frames of ``E + w_D·E_S`` (the
    tracker's objective E with its own weights, penetration term included, plus the silhouette
-   term E_S below), plus ``w_B·E_B``, the bone-length term below. Each frame's root may move by
+   term E_S below), plus ``w_B·E_B``, the bone-length term below, plus E_H, the stature term
+   (:mod:`~swarmpose.tracking.shape_stature`: the height measured on the depth bounds the body's,
+   which E barely tells apart). Each frame's root may move by
    one of :data:`ROOT_OFFSETS_M` per candidate (a taller body moves its hips). Each candidate
    shape is a buffer upload into one scorer per key frame (same topology), each scorer keeping
    its frame's observation for the whole fit.
@@ -34,12 +36,13 @@ by amounts that depend on the body (a keypoint's depth is the nearest surface's,
 by a constant per joint): with noise-free 2D joints the same walks' limbs came out 1.2 % short on
 the male bodies and 1.1-1.5 % long on the female ones. So before the sweep and each round the
 lift is run on the current shape's own noise-free render at the key frames' poses
-(:func:`lift_bias`), and E_B's lengths are the observed ones less that bias: like E, E_B then
-compares what the sensor and the lift make of a body with what they made of the person. The bias
-is each sweep candidate's own (its genders are far apart, and the bias flips sign between male
-and female bodies), then in each round the current shape's, used for every candidate of that
-round's shape PSO (calibrating each of its 272 candidates would cost 1.5-2 s apiece). The
-energies of different rounds are therefore measured against different E_B targets.
+(:func:`~swarmpose.tracking.lift_bias.lift_bias`), and E_B's lengths are the observed ones less
+that bias: like E, E_B then compares what the sensor and the lift make of a body with what they
+made of the person. The bias is each sweep candidate's own (its genders are far apart, and the
+bias flips sign between male and female bodies), then in each round the current shape's, used
+for every candidate of that round's shape PSO (calibrating each of its 272 candidates would cost
+1.5-2 s apiece). The energies of different rounds are therefore measured against different E_B
+targets.
 E_J's 3D term stays in the fit though the build biases it (a heavier body's joints lift farther in
 front: :data:`~swarmpose.tracking.lift.JOINT_RADIUS` is one per joint); the term left out, or its
 targets corrected like E_B's, measured no better (BENCHMARKS.md, personalisation fourth part).
@@ -71,13 +74,12 @@ from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError, PersonalisationError
 from swarmpose.detect.joints import Joints2D
 from swarmpose.gpu.context import ClContext
-from swarmpose.gpu.reference import raycast_tiles
 from swarmpose.gpu.scorer import ParticleScorer
-from swarmpose.gpu.tile import TileBox
 from swarmpose.sources.base import Frame
+from swarmpose.tracking import shape_stature
 from swarmpose.tracking.body_tracker import BodyTracker, observed_depth
 from swarmpose.tracking.config import TrackerConfig
-from swarmpose.tracking.lift import lift_keypoints, median_depth
+from swarmpose.tracking.lift_bias import LIMB_BONES, lift_bias, typical_depth
 from swarmpose.tracking.objective import JointTargets, Objective
 from swarmpose.tracking.pso import PsoConfig, minimise
 
@@ -97,12 +99,6 @@ class ShapeSample:
     pose: np.ndarray
 
 
-LIMB_BONES = tuple((f"{side}_{a}", f"{side}_{b}") for side in ("left", "right")
-                   for a, b in (("shoulder", "elbow"), ("elbow", "wrist"), ("knee", "ankle")))
-"""Point pairs whose distance is a bone's length, whatever the pose (E_B). Not the hips: a hip
-keypoint lifts onto the belly's surface, far in front of the joint, so thighs measured 41-43 cm
-against 37.6 true and shoulder-hip 43-45 against 45.7 (female walk), and heights came out
-2-2.8 cm tall with them."""
 BONE_WEIGHT = 5.0
 """w_B: the bone-length term's weight per cm of mean difference."""
 
@@ -127,6 +123,7 @@ class FitSettings:
     pose_steps: int = 2
     bone_weight: float = BONE_WEIGHT
     debias_lift: bool = True  # take the lift's own lengthening (lift_bias) off the observed limb lengths
+    stature_weight: float = shape_stature.WEIGHT  # E_H (0: off), see shape_stature
     sweep: dict[str, tuple[float, ...]] = field(default_factory=lambda: dict(SWEEP))
 
 
@@ -134,7 +131,9 @@ class FitSettings:
 class ShapeFit:
     """The result: parameters ``x`` (D,) and by name, the full-resolution and tracking bodies,
     the key frames (indices into the samples that had a pose), the energy after each round (each
-    against that round's E_B targets, see the module docstring), and seconds."""
+    against that round's E_B targets, see the module docstring), seconds, and the stature measured
+    on the depth with the frames it was measured on (None: too few upright frames, or the term is
+    off)."""
 
     x: np.ndarray
     parameters: dict[str, float]
@@ -143,6 +142,8 @@ class ShapeFit:
     keyframes: list[int]
     energy: list[float] = field(default_factory=list)
     seconds: float = 0.0
+    stature_m: float | None = None
+    stature_frames: int = 0
 
 
 NOISE_AXES = 1.0
@@ -192,44 +193,6 @@ def observed_bone_lengths(samples: Sequence[ShapeSample], body: SkinnedBody, int
             if a in where and b in where:
                 seen[(a, b)].append(float(np.linalg.norm(where[a] - where[b])))
     return {bone: debiased_length(np.array(v), noise_axes) for bone, v in seen.items() if len(v) >= 3}
-
-
-def model_depth(body: SkinnedBody, pose: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
-    """The depth (H, W) float32 m (0: no hit) of ``body`` at ``pose`` (36,), without noise: one ray
-    per pixel centre (OpenCV, as :meth:`Intrinsics.project`) cast at the dual-quaternion-skinned mesh."""
-    verts = body.pose(np.asarray(pose, float)[None], "dqs")
-    w, h = intrinsics.width, intrinsics.height
-    return raycast_tiles(verts, np.asarray(body.triangles), TileBox(0, 0, w, h, w, h).rays(intrinsics))[0]
-
-
-def typical_depth(frame: Frame) -> float | None:
-    """The median (m) of ``frame``'s valid depth, the lift's ``typical_depth`` on it (None: no depth)."""
-    return median_depth(observed_depth(frame.depth))
-
-
-def lift_bias(body: SkinnedBody, poses: Sequence[np.ndarray], typical: Sequence[float | None],
-              intrinsics: Intrinsics) -> dict[tuple[str, str], float]:
-    """How much the lift lengthens each :data:`LIMB_BONES` pair on ``body`` itself (m, median over
-    the frames): the body's own joints at each pose (36,), projected without noise and lifted
-    (:func:`~swarmpose.tracking.lift.lift_keypoints`) on its own rendered depth
-    (:func:`model_depth`), minus the rest length. ``typical``: each frame's :func:`typical_depth`,
-    so that the lift's window is the one it used on the observed frame (same pixels, whatever the
-    background; None: the frame is skipped). Pairs never lifted are left out."""
-    names = sorted({n for bone in LIMB_BONES for n in bone})
-    seen: dict[tuple[str, str], list[float]] = {b: [] for b in LIMB_BONES}
-    for pose, frame_depth in zip(poses, typical):
-        depth = model_depth(body, pose, intrinsics)
-        if frame_depth is None or not np.any(depth > 0):
-            continue
-        points = body.posed_points(np.asarray(pose, float)[None], names)[0]
-        uv = intrinsics.project(points)
-        lifted = lift_keypoints(depth, intrinsics, {n: (float(x), float(y), 1.0) for n, (x, y) in zip(names, uv)},
-                                typical_depth=frame_depth)
-        for a, b in LIMB_BONES:
-            if np.all(np.isfinite(lifted[a])) and np.all(np.isfinite(lifted[b])):
-                seen[(a, b)].append(float(np.linalg.norm(lifted[a] - lifted[b])))
-    return {(a, b): float(np.median(v)) - float(np.linalg.norm(body.point(a) - body.point(b)))
-            for (a, b), v in seen.items() if v}
 
 
 def bone_energy(body: SkinnedBody, observed: dict[tuple[str, str], float]) -> float:
@@ -324,6 +287,11 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
     observed = observed_bone_lengths(usable, body, intrinsics, config.min_score) if settings.bone_weight > 0 else {}
     bones = dict(observed)
     typical = [typical_depth(k.sample.frame) for k in keys]  # the frames' own: the same for every shape
+    stature, measured = (shape_stature.measured_stature(usable, body, intrinsics, config.min_score)
+                         if settings.stature_weight > 0 else (None, 0))
+    if progress is not None and settings.stature_weight > 0:
+        progress(f"stature on the depth: {'none' if stature is None else f'{stature:.3f} m'} ({measured} upright "
+                 "frames measured)")
 
     def calibrate(x_now: np.ndarray) -> None:
         """E_B's lengths: the observed ones less the lift's bias on the full body of ``x_now`` at
@@ -337,8 +305,8 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
                                                f"{b.split('_', 1)[1]} {100 * v:+.1f} cm" for (a, b), v in bias.items()))
 
     def energy_of(shaped: SkinnedBody) -> float:
-        return (sum(k.energy(shaped) for k in keys) / len(keys)
-                + settings.bone_weight * bone_energy(shaped, bones))
+        return (sum(k.energy(shaped) for k in keys) / len(keys) + settings.bone_weight * bone_energy(shaped, bones)
+                + shape_stature.stature_energy(shape_stature.full_height(shaped), stature, settings.stature_weight))
 
     def shape_energy(candidates: np.ndarray) -> np.ndarray:
         return np.array([energy_of(space.fitting_body(cand)) for cand in candidates])
@@ -377,7 +345,7 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
                      + ", ".join(f"{k} {v:.3f}" for k, v in space.parameters(x).items()))
     full = space.full_body(x)
     return ShapeFit(x, space.parameters(x), full, space.tracking_body(x), chosen, energies,
-                    time.perf_counter() - t0)
+                    time.perf_counter() - t0, stature, measured)
 
 
 def _sweep(space: ShapeSpace, keys: list[_KeyFrame], refit: Callable[[SkinnedBody], float],

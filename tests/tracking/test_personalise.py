@@ -166,7 +166,7 @@ def test_model_depth_is_the_first_hit_of_each_pixel_ray():
     """The body's rendered depth against a numpy ray-triangle intersection at sampled pixels."""
     from swarmpose.body.loader import load_body
     from swarmpose.core.camera import Intrinsics
-    from swarmpose.tracking.personalise import model_depth
+    from swarmpose.tracking.lift_bias import model_depth
 
     body = load_body(f"makehuman:{MAKEHUMAN}", "female").tracking_lod(1500)
     k = Intrinsics(width=160, height=120, fx=140.0, fy=140.0, cx=79.5, cy=59.5)
@@ -192,7 +192,7 @@ def test_lift_bias_on_the_model_is_the_lifts_own_lengthening_on_the_observed_fra
     from swarmpose.sources.registry import open_source
     from swarmpose.tracking.body_tracker import observed_depth
     from swarmpose.tracking.lift import lift_keypoints
-    from swarmpose.tracking.personalise import LIMB_BONES, lift_bias, typical_depth
+    from swarmpose.tracking.lift_bias import LIMB_BONES, lift_bias, typical_depth
 
     body = load_body(f"makehuman:{MAKEHUMAN}", "male-tall")
     truth = [json.loads(line) for line in (tall_walk / "groundtruth.jsonl").read_text().splitlines()]
@@ -228,7 +228,7 @@ def test_the_lifted_joints_lie_farther_in_front_of_a_heavier_bodys_joints():
     from swarmpose.body.loader import load_body
     from swarmpose.core.camera import Intrinsics
     from swarmpose.tracking.lift import lift_keypoints, median_depth
-    from swarmpose.tracking.personalise import model_depth
+    from swarmpose.tracking.lift_bias import model_depth
 
     k = Intrinsics(width=320, height=240, fx=285.0, fy=285.0, cx=159.5, cy=119.5)
     names = ("left_hip", "right_hip", "left_shoulder", "right_shoulder")
@@ -255,6 +255,7 @@ def test_personalize_recovers_a_tall_subjects_height_and_writes_a_body_that_load
     from swarmpose.body.loader import load_body
     from swarmpose.cli.main import main
     from swarmpose.tracking.personalise import body_measures
+    from swarmpose.tracking.shape_stature import BAND
 
     glb = tmp_path / "me.glb"
     code = main(["personalize", str(tall_walk), "--body", f"makehuman:{MAKEHUMAN}", "--frames", "16",
@@ -266,6 +267,10 @@ def test_personalize_recovers_a_tall_subjects_height_and_writes_a_body_that_load
     fitted = load_body(str(glb))
     assert abs(fitted.height - truth["height_m"]) < 0.04, (fitted.height, truth)
     assert report["height_m"] == pytest.approx(fitted.height, abs=1e-3)
+    # the stature term: measured on the depth, it bounds the fitted height (its band, plus 1 cm)
+    assert report["stature_frames"] >= 3
+    assert report["stature_measured_m"] == pytest.approx(truth["height_m"], rel=0.03)
+    assert report["height_m"] <= report["stature_measured_m"] * (1 + BAND[1]) + 0.01, report
     assert abs(report["volume_l"] / truth["volume_l"] - 1) < 0.12, (report["volume_l"], truth)
     assert fitted.metadata["personalised"]["parameters"] == report["parameters"]
     assert set(report["parameters"]) == {"gender", "caucasian", "muscle", "weight", "height"}
