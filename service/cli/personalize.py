@@ -36,7 +36,8 @@ def cmd_personalize(args: argparse.Namespace) -> int:
     fit = result.fit
     measures = body_measures(fit.body)
     summary = {"body": result.space.body_spec(), "shape": result.space.shape_spec(fit.x),
-               "parameters": fit.parameters, **measures, "stature_measured_m": _rounded(fit.stature_m),
+               "parameters": fit.parameters, **measures,
+               "stature_measured_m": None if fit.stature_m is None else round(fit.stature_m, 4),
                "stature_frames": fit.stature_frames, "frames_read": result.frames_read,
                "frames_tracked": len(result.samples), "keyframes": len(fit.keyframes),
                "seconds": round(fit.seconds, 1), "source": config.source, "detector": config.detector}
@@ -55,10 +56,6 @@ def cmd_personalize(args: argparse.Namespace) -> int:
                  f" (stature measured on the depth: {fit.stature_m:.3f} m over {fit.stature_frames} upright frames)"))
         print(f"  wrote {summary['out']} (use it with --body {summary['out']})")
     return 0
-
-
-def _rounded(value: float | None) -> float | None:
-    return None if value is None else round(value, 4)
 
 
 def add_personalize_command(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:

@@ -6,8 +6,8 @@ about 1 in 330-400, the size of a pose refit's scatter, and some builds came out
 with errors of one sign over seeds and round counts (female-slim +3.0 to +3.5 cm, male-tall +2.5
 to +3.2, a caucasian-0.5 mix -2.5 to -3.7; BENCHMARKS.md, personalisation fourth and fifth
 parts). The automatic height's measure (:func:`swarmpose.tracking.stature.person_stature`: the
-top of the head above the floor, where the fitted pose only says where to look) read those
-subjects' walks within -1.4 to -0.6 %.
+top of the head above the floor, where the fitted pose only says where to look) read all 17
+bench subjects' walks short by 0.6-1.5 % (BENCHMARKS.md, personalisation sixth part).
 
 **The term.** At every sample where the lifted joints stand upright on a straight knee
 (:func:`~swarmpose.tracking.stature.upright_stature` without the fitted pose's test: the samples
@@ -17,7 +17,7 @@ measured; their median
 ``H`` costs nothing; beyond it, :data:`WEIGHT` per cm. The band is lopsided because posture only
 lowers the head: a person's head top is never above their stature but for the measure's noise
 (:data:`BAND`'s lower share), while a walk lowers it by up to about 1.2 % (MakeHuman subjects
-walking CMU 131_01 at 3 m: 0.988-0.995 of their stature; other clips and views 0.995-1.004).
+walking CMU 131_01 at 3 m: 0.985-0.995 of their stature; other clips and views 0.992-1.004).
 """
 
 from __future__ import annotations

@@ -185,13 +185,13 @@ def facing_along(points: np.ndarray, axis: np.ndarray, max_rad: float = FLAT_MAX
 
 
 def floor_plane(points: np.ndarray, up: np.ndarray, mask: np.ndarray, hit: np.ndarray,
-                flat: np.ndarray, standing: np.ndarray | None = None) -> tuple[np.ndarray, float] | None:
+                flat: np.ndarray, standing: np.ndarray) -> tuple[np.ndarray, float] | None:
     """The floor under the person, None when none is seen: (unit normal (3,) on the side of ``up``,
     level: the normal's dot product with the floor's points, m). Its points are the flat pixels
     (``flat``) of ``mask`` outside the model's render ``hit`` in the lowest :data:`FLOOR_SHARE` of
     the person's extent along ``up`` (all those pixels where fewer than :data:`FLAT_PIXELS` are
     flat: noisy depth at range, the plane then held to :data:`FALLBACK_MAX_TILT_RAD` of the fitted
-    body's ``standing`` axis (3,), by default ``up``); the plane is the RANSAC plane among them
+    body's ``standing`` axis (3,), :func:`long_axis`); the plane is the RANSAC plane among them
     (:func:`ransac_plane_inliers`: the tops of shoes beside the model are flat too) refitted by
     least squares (SVD) to its inliers, at least :data:`FLOOR_PIXELS` of them, and a floor only
     when it is within :data:`FLOOR_MAX_TILT_RAD` of lying across ``up``."""
@@ -201,8 +201,7 @@ def floor_plane(points: np.ndarray, up: np.ndarray, mask: np.ndarray, hit: np.nd
     floor = low_around & flat
     max_tilt, across = FLOOR_MAX_TILT_RAD, up
     if floor.sum() < FLAT_PIXELS:
-        floor, max_tilt = low_around, FALLBACK_MAX_TILT_RAD
-        across = up if standing is None else standing
+        floor, max_tilt, across = low_around, FALLBACK_MAX_TILT_RAD, standing
     if floor.sum() < FLOOR_PIXELS:
         return None
     on = ransac_plane_inliers(points[floor], FLOOR_INLIER_M, FLOOR_RANSAC_ITERATIONS)
