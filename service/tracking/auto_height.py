@@ -122,8 +122,9 @@ class HeightFittingTracker(BodyTracker):
             self.set_body(self.given_body)
         self.factors, self.factor, self.locked = [], 1.0, False
 
-    def step(self, frame: Frame, joints: Joints2D | None, others_removed: bool = False) -> BodyResult:
-        result = super().step(frame, joints, others_removed)
+    def step(self, frame: Frame, joints: Joints2D | None, others_removed: bool = False,
+             start_min_score: float | None = None) -> BodyResult:
+        result = super().step(frame, joints, others_removed, start_min_score)
         found = result.found
         if not self.locked and found.state != "lost" and found.pose is not None:
             targets = self.objective.targets if self.objective is not None else None

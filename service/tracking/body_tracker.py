@@ -86,8 +86,7 @@ def recheck_due(index: int, age: int, every: int) -> bool:
 
 
 def observed_depth(depth: np.ndarray) -> np.ndarray:
-    """Depth (H, W) as float32 metres with every invalid reading (NaN, infinite, <= 0) set to 0,
-    the scorer's "no measurement"."""
+    """Depth (H, W) as float32 m, every invalid reading (NaN, inf, <= 0) set to 0 (no measurement)."""
     depth = np.asarray(depth, dtype=np.float32)
     return np.where(np.isfinite(depth) & (depth > 0), depth, np.float32(0.0))
 
@@ -183,10 +182,12 @@ class BodyTracker:
         return box_around(np.concatenate(pts), margin=0.1)
 
     # ------------------------------------------------------------------ per frame
-    def step(self, frame: Frame, joints: Joints2D | None, others_removed: bool = False) -> BodyResult:
+    def step(self, frame: Frame, joints: Joints2D | None, others_removed: bool = False,
+             start_min_score: float | None = None) -> BodyResult:
         """Track one frame with its detection (None: no detector output for it). others_removed:
         other people's pixels were taken out of ``frame.depth`` (several people), so the lost
-        test's depth agreement counts only the model's pixels that have an observation."""
+        test's depth agreement counts only the model's pixels that have an observation.
+        start_min_score: the least keypoint score at a track's start (None: ``config.min_score``)."""
         t0 = time.perf_counter()
         if self.on_step is not None:
             self.on_step(self, frame, joints, others_removed)
@@ -198,15 +199,15 @@ class BodyTracker:
         depth = observed_depth(depth)
         if self.config.mode == "lift":
             return self._lift(depth, joints, t0)
-        targets = JointTargets.from_detection(joints, depth, self.intrinsics, self.body, self.config.min_score)
+        least = start_min_score if self.previous is None and start_min_score is not None else self.config.min_score
+        targets = JointTargets.from_detection(joints, depth, self.intrinsics, self.body, least)
         has_depth = bool(np.any(depth > 0))
         lifted = {n: p for n, p in zip(targets.names, targets.xyz)}
         state = "tracking" if self.previous is not None else "init"
         if self.previous is None:
             centre = torso_pose(self.body, lifted, self.body.rest_angles)
             if centre is None:
-                return self._lost("no person: neither both shoulders nor 3 of the hips and shoulders detected "
-                                  "with depth", t0, joints)
+                return self._lost("no person: no torso (both shoulders, both hips or 3 of 4) with depth", t0, joints)
         if not has_depth and targets.count == 0:
             return self._lost("no joints detected and no valid depth", t0, joints)
 

@@ -29,31 +29,40 @@ CAMERA_UP = np.array([0.0, -1.0, 0.0])
 """The camera frame's up (y points down): an upper body's torso is assumed upright along it."""
 
 
+def _upright_torso(body: SkinnedBody, across: np.ndarray) -> np.ndarray:
+    """(3,) m: from the hips' middle to the shoulders' of ``body`` standing upright, along the
+    camera's up made perpendicular to ``across`` (3,) (a shoulder or hip line)."""
+    across = across / max(np.linalg.norm(across), 1e-9)
+    up = CAMERA_UP - (CAMERA_UP @ across) * across
+    length = np.linalg.norm((body.point("left_shoulder") + body.point("right_shoulder")) / 2.0
+                            - (body.point("left_hip") + body.point("right_hip")) / 2.0)
+    return length * up / max(np.linalg.norm(up), 1e-9)
+
+
 def torso_pose(body: SkinnedBody, lifted: dict[str, np.ndarray], angles: np.ndarray,
                upright: bool = True) -> np.ndarray | None:
     """A (36,) pose whose torso matches lifted joints {name: (3,) m}, or None when fewer than
     three of the four torso joints (hips, shoulders) have a finite lift and not both
-    shoulders. angles: (29,) rad.
+    shoulders or both hips. angles: (29,) rad.
 
-    With both shoulders but no hip (an upper body filling the frame: a desk, a close camera)
-    and ``upright`` (starts; not a running track, where a bending person is not upright)
-    the torso is assumed upright: the hips sit the body's torso length below the shoulders'
-    middle, along the camera's up made perpendicular to the shoulder line (the search then
+    With both shoulders but no hip (an upper body filling the frame: a desk, a close camera),
+    or both hips but no shoulder (shoulders out of view or hidden behind someone), and
+    ``upright`` (starts; not a running track, where a bending person is not upright) the torso
+    is assumed upright: the missing pair's middle sits the body's torso length below (above)
+    the other's, along the camera's up made perpendicular to the pair's line (the search then
     fits any lean)."""
     pts = {k: np.asarray(v, float) for k, v in lifted.items() if k in TORSO and np.all(np.isfinite(v))}
     shoulders = upright and "left_shoulder" in pts and "right_shoulder" in pts
-    if len(pts) < 3 and not shoulders:
+    hips = upright and "left_hip" in pts and "right_hip" in pts
+    if len(pts) < 3 and not (shoulders or hips):
         return None
     lefts = [pts[f"left_{j}"] - pts[f"right_{j}"] for j in ("hip", "shoulder")
              if f"left_{j}" in pts and f"right_{j}" in pts]
     hip, shoulder = _mid(pts, "left_hip", "right_hip"), _mid(pts, "left_shoulder", "right_shoulder")
     if hip is None and shoulders:
-        across = pts["left_shoulder"] - pts["right_shoulder"]
-        across /= max(np.linalg.norm(across), 1e-9)
-        upright = CAMERA_UP - (CAMERA_UP @ across) * across
-        length = np.linalg.norm((body.point("left_shoulder") + body.point("right_shoulder")) / 2.0
-                                - (body.point("left_hip") + body.point("right_hip")) / 2.0)
-        hip = shoulder - length * upright / max(np.linalg.norm(upright), 1e-9)
+        hip = shoulder - _upright_torso(body, pts["left_shoulder"] - pts["right_shoulder"])
+    elif shoulder is None and hips:
+        shoulder = hip + _upright_torso(body, pts["left_hip"] - pts["right_hip"])
     if not lefts or hip is None or shoulder is None:
         return None
     left = np.sum([v / max(np.linalg.norm(v), 1e-9) for v in lefts], axis=0)

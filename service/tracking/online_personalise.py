@@ -60,8 +60,9 @@ class PersonalisingTracker(BodyTracker):
             self.set_body(self.start_body)
         self.samples, self.state, self.reason, self.found = [], "collecting", "", {}
 
-    def step(self, frame: Frame, joints: Joints2D | None, others_removed: bool = False) -> BodyResult:
-        result = super().step(frame, joints, others_removed)
+    def step(self, frame: Frame, joints: Joints2D | None, others_removed: bool = False,
+             start_min_score: float | None = None) -> BodyResult:
+        result = super().step(frame, joints, others_removed, start_min_score)
         found = result.found
         if (self.state == "collecting" and found.state != "lost" and found.pose is not None
                 and not (others_removed and self.weights.depth > 0 and self.hidden_share() > MAX_HIDDEN_SHARE)):

@@ -13,9 +13,11 @@ each one's 2D joints (:func:`swarmpose.detect.per_person.detect_each`):
    depth term skips pixels without a measurement (paper Eq. 2). A track whose fit is lost
    keeps its id: its tracker restarts from the detection on the next frame.
 3. **New people** (segments no track took), largest first, get a new track while fewer than
-   ``max_people`` are tracked; the id is given only when the first fit finds a person (a
-   segment whose detection has no torso takes no id). The rest are counted as
-   ``beyond_max_people``.
+   ``max_people`` are tracked; the id is given only when the first fit finds a person. A
+   segment whose detection has no torso at the tracker's ``min_score`` is tried once more on
+   its own pixels alone, from the keypoints down to :data:`START_MIN_SCORE` (the segment
+   confirms what the network doubts); one that still has no torso takes no id. The rest are
+   counted as ``beyond_max_people``.
 4. **Tracks not seen** this frame keep their id and state for ``retire_frames`` frames (a
    short occlusion or a crossing), then are retired; ids are never reused. For the first
    :data:`COAST_FRAMES` of those frames the track is followed on the depth alone (a person
@@ -57,6 +59,11 @@ COAST_FRAMES = 15
 """A track not found in the segmentation (mostly hidden behind someone) is followed on the depth
 alone (no detection; every segmented person's pixels removed) for up to this many frames, and
 reported while its fit is not lost."""
+START_MIN_SCORE = 0.1
+"""A new person's segment whose detection has no torso at ``min_score`` starts its track from the
+keypoints down to this score, on the depth of the segment alone: the second person of the real
+Skeltrack frame 1399145206, whose head another's raised hand hides, gets shoulders of 0.12-0.13
+from MoveNet on its crop, hips of 0.23-0.37 (the other frames' people: 0.5-0.8)."""
 COASTING = "not found in the depth segmentation (hidden?): followed on the depth alone"
 
 
@@ -181,6 +188,8 @@ class PeopleTracker:
                 continue
             tracker = self._tracker(self._next_id)
             body = self._fit(tracker, frame, self._frame_for(frame, labels, o, people[o]), people[o].joints)
+            if (body is None or body.state == "lost") and people[o].segment is not None:  # START_MIN_SCORE
+                body = self._fit(tracker, frame, self._on_segment(frame, people[o]), people[o].joints, START_MIN_SCORE)
             if body is None or body.state == "lost":  # no person in its detection: no id for it
                 self.counts.no_person += 1
                 self._release(tracker)
@@ -204,11 +213,13 @@ class PeopleTracker:
                     track.centre, track.velocity = self._fit_centre(body, track.centre), np.zeros(3)
         return tuple(results[i] for i in sorted(results))
 
-    def _fit(self, tracker: BodyTracker, frame: Frame, seen: Frame, joints) -> BodyResult | None:
+    def _fit(self, tracker: BodyTracker, frame: Frame, seen: Frame, joints,
+             start_min_score: float | None = None) -> BodyResult | None:
         """One person's tracker on ``seen`` (``frame``, or a copy with other people's depth
-        removed); None (and the tracker restarted) when it throws."""
+        removed); None (and the tracker restarted) when it throws. start_min_score: as
+        :meth:`BodyTracker.step` takes it."""
         try:
-            return tracker.step(seen, joints, others_removed=seen is not frame)
+            return tracker.step(seen, joints, others_removed=seen is not frame, start_min_score=start_min_score)
         except Exception as exc:  # one person's failure must not cost the others their fit
             log.warning("frame %d: tracking person %d failed (%s: %s); it restarts", frame.index, tracker.body_id,
                         type(exc).__name__, exc)
@@ -272,6 +283,12 @@ class PeopleTracker:
         if labels is None or not np.any(labels):
             return frame
         return replace(frame, depth=np.where(labels != 0, np.float32(0.0), frame.depth))
+
+    @staticmethod
+    def _on_segment(frame: Frame, person: PersonDetection) -> Frame:
+        """``frame`` with the depth of ``person``'s segment alone (0 elsewhere): where a weak
+        keypoint lifts, it lifts onto this person."""
+        return replace(frame, depth=np.where(person.segment.mask, frame.depth, np.float32(0.0)))
 
     @staticmethod
     def _frame_for(frame: Frame, labels: np.ndarray | None, index: int, person: PersonDetection) -> Frame:
