@@ -52,7 +52,7 @@ from swarmpose.tracking.body_scene import body_scene
 from swarmpose.tracking.config import MODE_WEIGHTS, TrackerConfig
 from swarmpose.tracking.hidden_lifts import without_hidden_lifts
 from swarmpose.tracking.hypotheses import MERGE_SHARE, hypothesis_groups
-from swarmpose.tracking.init_pose import FACINGS_DEG, torso_pose, turned
+from swarmpose.tracking.init_pose import FACINGS_DEG, NO_TORSO, torso_pose, turned
 from swarmpose.tracking.lift import lift_eval_joints
 from swarmpose.tracking.limb_flips import limb_flips
 from swarmpose.tracking.objective import JointTargets, Objective, search_split
@@ -207,7 +207,7 @@ class BodyTracker:
         if self.previous is None:
             centre = torso_pose(self.body, lifted, self.body.rest_angles)
             if centre is None:
-                return self._lost("no person: no torso (both shoulders, both hips or 3 of 4) with depth", t0, joints)
+                return self._lost(NO_TORSO, t0, joints)
         if not has_depth and targets.count == 0:
             return self._lost("no joints detected and no valid depth", t0, joints)
 

@@ -16,6 +16,8 @@ from swarmpose.body.kinematics import matrix_to_quaternion, quaternion_to_matrix
 from swarmpose.body.skinned import SkinnedBody
 
 TORSO = ("left_hip", "right_hip", "left_shoulder", "right_shoulder")
+NO_TORSO = "no person: no torso (both shoulders, both hips or 3 of 4) with depth"
+"""The reason of a start without a :func:`torso_pose`."""
 
 
 def _mid(points: dict[str, np.ndarray], a: str, b: str) -> np.ndarray | None:

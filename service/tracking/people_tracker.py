@@ -43,6 +43,7 @@ from swarmpose.detect.per_person import PersonDetection
 from swarmpose.sources.base import Frame
 from swarmpose.tracking.association import NO_PAIR, Assignment, assign, colour_histogram, pair_costs
 from swarmpose.tracking.body_tracker import BodyTracker
+from swarmpose.tracking.init_pose import NO_TORSO
 from swarmpose.tracking.result import BodyResult
 
 log = logging.getLogger(__name__)
@@ -61,9 +62,13 @@ alone (no detection; every segmented person's pixels removed) for up to this man
 reported while its fit is not lost."""
 START_MIN_SCORE = 0.1
 """A new person's segment whose detection has no torso at ``min_score`` starts its track from the
-keypoints down to this score, on the depth of the segment alone: the second person of the real
-Skeltrack frame 1399145206, whose head another's raised hand hides, gets shoulders of 0.12-0.13
-from MoveNet on its crop, hips of 0.23-0.37 (the other frames' people: 0.5-0.8)."""
+keypoints down to this score, on the depth of its segment alone: the second person of the real
+Skeltrack frame 1399145206, whose head another's raised hand hides, gets hips of 0.23 and 0.37 from
+MoveNet on its crop (its shoulders, 0.12-0.13, find no depth of its own: they lie under the hand)
+and starts from both hips (:func:`~swarmpose.tracking.init_pose.torso_pose`). 0.2 would do for
+that frame; 0.1 leaves room for a weaker one. The segment-only depth leaves the model free outside
+the segment for that first fit: keypoints on the background find no depth, and the following
+frames are fitted on the whole depth as any other's."""
 COASTING = "not found in the depth segmentation (hidden?): followed on the depth alone"
 
 
@@ -188,8 +193,8 @@ class PeopleTracker:
                 continue
             tracker = self._tracker(self._next_id)
             body = self._fit(tracker, frame, self._frame_for(frame, labels, o, people[o]), people[o].joints)
-            if (body is None or body.state == "lost") and people[o].segment is not None:  # START_MIN_SCORE
-                body = self._fit(tracker, frame, self._on_segment(frame, people[o]), people[o].joints, START_MIN_SCORE)
+            if body is not None and body.reason == NO_TORSO and None not in (people[o].segment, people[o].joints):
+                body = self._retry_start(tracker, frame, people[o])
             if body is None or body.state == "lost":  # no person in its detection: no id for it
                 self.counts.no_person += 1
                 self._release(tracker)
@@ -284,11 +289,12 @@ class PeopleTracker:
             return frame
         return replace(frame, depth=np.where(labels != 0, np.float32(0.0), frame.depth))
 
-    @staticmethod
-    def _on_segment(frame: Frame, person: PersonDetection) -> Frame:
-        """``frame`` with the depth of ``person``'s segment alone (0 elsewhere): where a weak
-        keypoint lifts, it lifts onto this person."""
-        return replace(frame, depth=np.where(person.segment.mask, frame.depth, np.float32(0.0)))
+    def _retry_start(self, tracker: BodyTracker, frame: Frame, person: PersonDetection) -> BodyResult | None:
+        """A new person's second start when the first found no torso: on the depth of its segment
+        alone (where a weak keypoint lifts, it lifts onto this person), the keypoints down to
+        :data:`START_MIN_SCORE` (or the tracker's ``min_score`` if lower)."""
+        seen = replace(frame, depth=np.where(person.segment.mask, frame.depth, np.float32(0.0)))
+        return self._fit(tracker, frame, seen, person.joints, min(START_MIN_SCORE, tracker.config.min_score))
 
     @staticmethod
     def _frame_for(frame: Frame, labels: np.ndarray | None, index: int, person: PersonDetection) -> Frame:
