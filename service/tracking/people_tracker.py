@@ -287,13 +287,13 @@ class PeopleTracker:
         the segmentation did not find (mostly hidden) is background to the others."""
         if labels is None or not np.any(labels):
             return frame
-        return replace(frame, depth=np.where(labels != 0, np.float32(0.0), frame.depth))
+        return _depth_removed(frame, labels != 0)
 
     def _retry_start(self, tracker: BodyTracker, frame: Frame, person: PersonDetection) -> BodyResult | None:
         """A new person's second start when the first found no torso: on the depth of its segment
         alone (where a weak keypoint lifts, it lifts onto this person), the keypoints down to
         :data:`START_MIN_SCORE` (or the tracker's ``min_score`` if lower)."""
-        seen = replace(frame, depth=np.where(person.segment.mask, frame.depth, np.float32(0.0)))
+        seen = _depth_removed(frame, ~person.segment.mask)
         return self._fit(tracker, frame, seen, person.joints, min(START_MIN_SCORE, tracker.config.min_score))
 
     @staticmethod
@@ -304,4 +304,9 @@ class PeopleTracker:
         others = (labels != 0) & (labels != index + 1)
         if not others.any():
             return frame
-        return replace(frame, depth=np.where(others, np.float32(0.0), frame.depth))
+        return _depth_removed(frame, others)
+
+
+def _depth_removed(frame: Frame, where: np.ndarray) -> Frame:
+    """A copy of ``frame`` whose depth is 0 (no measurement) ``where`` (H, W) bool is set."""
+    return replace(frame, depth=np.where(where, np.float32(0.0), frame.depth))
