@@ -9,10 +9,12 @@ dropouts (BENCHMARKS.md, issue 15, seventh part).
 
 :func:`fill_dropouts` gives a zero pixel the median of its valid 8-neighbours where at least
 ``min_valid`` of them are valid. A dropout on the person's side of a straight outline has its
-three inner neighbours and on average two more, mostly the person's, so it takes the person's
-depth; one on the background's side takes the background's. A pixel just outside the outline of
-a person whose background was removed (UTD-MHAD, a segmented person) has at most three valid
-neighbours and stays empty, so the outline does not grow.
+three inner neighbours and on average two more (about 0.8 of them the person's, 1.2 the wall's),
+so it takes the person's depth; one on the background's side takes the background's. A pixel
+just outside a straight or convex stretch of the outline of a person whose background was removed
+(UTD-MHAD, a segmented person) has at most three valid neighbours and stays empty. The limit:
+there a pixel in a concave corner (an armpit, the crotch) or in a gap one pixel wide between an
+arm and the torso has more, and is filled, so the silhouette closes such gaps.
 """
 
 from __future__ import annotations

@@ -27,7 +27,9 @@ for every rendered pixel of the tile that no observation within T confirms (rend
 ``close``, normalised like E_D, cm). Its limit: an object in front of the person (closer than T)
 is charged too, so fit from a recording where the person is in full view. The fit's frames have
 their edge dropouts filled first (:func:`~swarmpose.tracking.depth_dropouts.fill_dropouts`),
-which E_S would otherwise charge as empty space and shrink the body by.
+which E_S would otherwise charge as empty space and shrink the body by (the observed bone lengths
+are lifted on the filled depth too; the pose step, the stature measure and the online collection's
+hidden share still read the frames as they are).
 
 E_B, the bone-length term: the poses held during a shape step were fitted with the previous
 shape, and a body too short can bend and lean to explain them (female-tall came out 5 cm short
