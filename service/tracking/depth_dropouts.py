@@ -44,11 +44,12 @@ def fill_dropouts(depth: np.ndarray, min_valid: int = MIN_VALID) -> np.ndarray:
     fill = (z <= 0) & (valid >= min_valid)
     if not fill.any():
         return z.copy()
+    around = neighbours[:, fill]  # (8, N), in the order of np.nonzero(fill)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN neighbourhoods, never used
-        median = np.nanmedian(neighbours[:, fill], axis=0)
-    agree = (np.abs(neighbours[:, fill] - median) <= AGREE_M).sum(axis=0) * 2 > valid[fill]
+        median = np.nanmedian(around, axis=0)
+    agree = (np.abs(around - median) <= AGREE_M).sum(axis=0) * 2 > valid[fill]
     out = z.copy()
-    rows, cols = np.nonzero(fill)  # the order of neighbours[:, fill]
+    rows, cols = np.nonzero(fill)
     out[rows[agree], cols[agree]] = median[agree]
     return out

@@ -188,6 +188,12 @@ def debiased_length(lengths: np.ndarray, noise_axes: float = NOISE_AXES) -> floa
     return m - min(noise_axes * spread * spread / (2.0 * m), MAX_CORRECTION * m)
 
 
+def fitting_depth(frame: Frame) -> np.ndarray:
+    """The depth (H, W) float32 m (0: none) the fit reads of ``frame``: invalid readings at 0,
+    edge dropouts filled (:func:`~swarmpose.tracking.depth_dropouts.fill_dropouts`)."""
+    return fill_dropouts(observed_depth(frame.depth))
+
+
 def observed_bone_lengths(samples: Sequence[ShapeSample], body: SkinnedBody, intrinsics: Intrinsics,
                           min_score: float, noise_axes: float = NOISE_AXES) -> dict[tuple[str, str], float]:
     """Each :data:`LIMB_BONES` pair's length (m) over ``samples``: :func:`debiased_length` of the
@@ -195,8 +201,7 @@ def observed_bone_lengths(samples: Sequence[ShapeSample], body: SkinnedBody, int
     depth (pairs seen in fewer than 3 frames are left out)."""
     seen: dict[tuple[str, str], list[float]] = {b: [] for b in LIMB_BONES}
     for sample in samples:
-        depth = fill_dropouts(observed_depth(sample.frame.depth))
-        targets = JointTargets.from_detection(sample.joints, depth, intrinsics, body, min_score)
+        targets = JointTargets.from_detection(sample.joints, fitting_depth(sample.frame), intrinsics, body, min_score)
         where = {n: p for n, p in zip(targets.names, targets.xyz) if np.all(np.isfinite(p))}
         for a, b in LIMB_BONES:
             if a in where and b in where:
@@ -238,7 +243,7 @@ class _KeyFrame:
         except ConfigError:  # the fit's finer tile needs more local memory than the device has (GPUs)
             scorer = ParticleScorer(body, intrinsics, config.tile, threshold=config.threshold_m, context=context)
         self.objective = Objective(body, intrinsics, scorer, config.weights)
-        depth = fill_dropouts(observed_depth(sample.frame.depth))
+        depth = fitting_depth(sample.frame)
         targets = JointTargets.from_detection(sample.joints, depth, intrinsics, body, config.min_score)
         self.objective.set_frame(depth, tracker.search_box(self.pose, targets), targets, self.pose)
         self.threshold = config.threshold_m
