@@ -100,7 +100,9 @@ def side_on_share(pose: np.ndarray) -> float:
 class ObjectiveWeights:
     """w_D, w_J, α, the clamp T (m), the lowest detection score a joint needs, whether
     detected left/right pairs may match the model crossed, and w_P (per cm of an elbow or
-    wrist inside the torso), w_A (per rad² of the arms' angles away from the rest pose)."""
+    wrist inside the torso), w_A (per rad² of the arms' angles away from the rest pose), w_S
+    (per cm of E_S, the model's pixels no observation within T confirms: the shape fit's
+    silhouette term, see :mod:`~swarmpose.tracking.personalise`; 0 in tracking)."""
 
     depth: float = 3.0
     joints: float = 1.0
@@ -110,9 +112,10 @@ class ObjectiveWeights:
     label_swaps: bool = True
     penetration: float = 1.0
     arm_prior: float = 0.0
+    silhouette: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("depth", "joints", "threshold_m", "penetration", "arm_prior"):
+        for name in ("depth", "joints", "threshold_m", "penetration", "arm_prior", "silhouette"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ConfigError(f"objective weight {name} must be finite and >= 0, got {value}")
@@ -208,9 +211,10 @@ class Objective:
     """E(h, o) for batches of poses on one frame.
 
     Per frame call :meth:`set_frame`; then ``objective(h)`` returns E (P,) and
-    :attr:`last_parts` holds E_D, E_J2D, E_J3D, E_J, E_P, E_A (P,) of the last call. One launch of
-    the scorer computes all the terms (forward kinematics, the depth term, and the joint and
-    penetration terms from the named points, cl/include/joint_term.h); :meth:`host_terms` is
+    :attr:`last_parts` holds E_D, E_J2D, E_J3D, E_J, E_P, E_A (and E_S where w_S > 0) (P,) of the
+    last call. One launch of the scorer computes all the terms (forward kinematics, the depth
+    term, and the joint and penetration terms from the named points, cl/include/joint_term.h,
+    and the pixel counts E_S needs); :meth:`host_terms` is
     the numpy oracle of the latter. :attr:`spent_s` accumulates where the calls' time went (s):
     ``score`` (the launch and its wait: forward kinematics and every term on the device),
     ``joints`` (combining the terms on the host), and ``calls``.
@@ -325,6 +329,18 @@ class Objective:
         inside = np.maximum(self.torso_radius - np.linalg.norm(arms - nearest, axis=2), 0.0)
         return 100.0 * inside.sum(axis=1)
 
+    def silhouette_cm(self, counts: dict[str, np.ndarray], scorer) -> np.ndarray:
+        """(P,) cm: E_S, T for each of the tile's rendered pixels that no observation within T
+        confirms (``rendered - close``), normalised as E_D on ``scorer``'s level.
+
+        E_D charges an observed pixel the model misses, but not a model pixel where nothing is
+        seen or where the sensor sees farther than T behind it: a wall behind the person costs T
+        whether the model covers it or not, so a body can grow for free. The shape fit adds this
+        term (a body too large then costs); tracking leaves it off."""
+        normaliser = self.normaliser if scorer is self.scorer else self.coarse_normaliser
+        unconfirmed = (counts["rendered"] - counts["close"]).astype(float)
+        return 100.0 * scorer.threshold * unconfirmed / normaliser
+
     @property
     def _swap_px(self) -> float:
         return SWAP_COST * max(self.targets.extent_px, 1.0)
@@ -381,8 +397,12 @@ class Objective:
         e_j = w.alpha * e_2d + (1.0 - w.alpha) * e_3d
         e_p = result.terms["E_P"] if w.penetration > 0 else zeros
         e_a = self.arm_prior_rad2(h) if w.arm_prior > 0 else zeros
-        total = w.depth * e_d + w.joints * e_j + w.penetration * e_p + w.arm_prior * self.arm_prior_scale * e_a
+        e_s = self.silhouette_cm(result.counts, scorer) if w.silhouette > 0 and self.uses_depth else zeros
+        total = (w.depth * e_d + w.joints * e_j + w.penetration * e_p + w.arm_prior * self.arm_prior_scale * e_a
+                 + w.silhouette * e_s)
         self.last_parts = {"E": total, "E_D": e_d, "E_J": e_j, "E_J2D": e_2d, "E_J3D": e_3d, "E_P": e_p, "E_A": e_a}
+        if w.silhouette > 0:  # the shape fit's; tracking's published parts stay as they are
+            self.last_parts["E_S"] = e_s
         self.last_counts = result.counts
         spent = self.spent_s
         spent["score"] += t1 - t0

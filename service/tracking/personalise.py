@@ -24,7 +24,8 @@ model pixel where nothing is seen, or where the sensor sees farther than T behin
 wall behind the person costs T whether the model covers it or not. So a body could grow for free
 (with the true poses held on noise-free depth a slim male came out 16 % too large). E_S charges T
 for every rendered pixel of the tile that no observation within T confirms (rendered less
-``close``, normalised like E_D, cm). Its limit: an object in front of the person (closer than T)
+``close``, normalised like E_D, cm; :meth:`~swarmpose.tracking.objective.Objective.silhouette_cm`,
+on at w_S = w_D). Its limit: an object in front of the person (closer than T)
 is charged too, so fit from a recording where the person is in full view. The fit's frames have
 their edge dropouts filled first (:func:`~swarmpose.tracking.depth_dropouts.fill_dropouts`),
 which E_S would otherwise charge as empty space and shrink the body by (the observed bone lengths
@@ -89,7 +90,7 @@ from swarmpose.tracking.body_tracker import BodyTracker, observed_depth
 from swarmpose.tracking.config import TrackerConfig
 from swarmpose.tracking.depth_dropouts import fill_dropouts
 from swarmpose.tracking.lift_bias import LIMB_BONES, lift_bias, typical_depth
-from swarmpose.tracking.objective import JointTargets, Objective
+from swarmpose.tracking.objective import JointTargets, Objective, ObjectiveWeights
 from swarmpose.tracking.pso import PsoConfig, minimise
 
 log = logging.getLogger(__name__)
@@ -233,20 +234,20 @@ def spread_frames(poses: Sequence[np.ndarray], count: int) -> list[int]:
 
 
 class _KeyFrame:
-    """One key frame's objective, on a scorer of its own that keeps the frame's observation."""
+    """One key frame's objective (the fit's weights: E_S on), on a scorer of its own that keeps
+    the frame's observation (its depth with dropouts filled)."""
 
     def __init__(self, sample: ShapeSample, body: SkinnedBody, intrinsics: Intrinsics, config: TrackerConfig,
-                 tile: tuple[int, int], context: ClContext, tracker: BodyTracker):
+                 weights: ObjectiveWeights, tile: tuple[int, int], context: ClContext, tracker: BodyTracker):
         self.sample, self.pose = sample, np.asarray(sample.pose, float)
         try:
             scorer = ParticleScorer(body, intrinsics, tile, threshold=config.threshold_m, context=context)
         except ConfigError:  # the fit's finer tile needs more local memory than the device has (GPUs)
             scorer = ParticleScorer(body, intrinsics, config.tile, threshold=config.threshold_m, context=context)
-        self.objective = Objective(body, intrinsics, scorer, config.weights)
+        self.objective = Objective(body, intrinsics, scorer, weights)
         depth = fitting_depth(sample.frame)
         targets = JointTargets.from_detection(sample.joints, depth, intrinsics, body, config.min_score)
         self.objective.set_frame(depth, tracker.search_box(self.pose, targets), targets, self.pose)
-        self.threshold = config.threshold_m
 
     def energy(self, body: SkinnedBody) -> float:
         """The least E + w_D·E_S of this frame's pose with ``body`` over the root offsets of
@@ -256,11 +257,6 @@ class _KeyFrame:
         up = quaternion_to_matrix(self.pose[3:7])[:, 1]
         poses[:, :3] += ROOT_OFFSETS_M[:, :1] * up + ROOT_OFFSETS_M[:, 1:2] * np.array([0.0, 0.0, 1.0])
         total = np.asarray(self.objective(poses), float)
-        if self.objective.uses_depth:
-            counts = self.objective.last_counts
-            unconfirmed = (counts["rendered"] - counts["close"]).astype(float)
-            e_s = 100.0 * self.threshold * unconfirmed / self.objective.normaliser
-            total = total + self.objective.weights.depth * e_s
         best = int(np.argmin(total))
         self.best_pose = poses[best]
         return float(total[best])
@@ -292,8 +288,9 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
     x = space.start
     body = space.fitting_body(x)
     tracker = BodyTracker(body, intrinsics, config, context)
+    weights = replace(config.weights, silhouette=config.weights.depth)  # the shape step's E + w_D·E_S
     chosen = spread_frames([s.pose for s in usable], settings.keyframes)
-    keys = [_KeyFrame(usable[k], body, intrinsics, config, settings.tile, context, tracker) for k in chosen]
+    keys = [_KeyFrame(usable[k], body, intrinsics, config, weights, settings.tile, context, tracker) for k in chosen]
     rng = np.random.default_rng(settings.seed)
     pso = PsoConfig(particles=settings.particles, generations=settings.generations, variant="canonical")
     span = space.upper - space.lower

@@ -3,6 +3,8 @@ scored in float64 numpy, E_J2D / E_J3D by hand, lifting against rendered ground 
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -90,6 +92,35 @@ def test_depth_term_matches_open3d_and_numpy(body, scene):
     assert objective.normaliser == n_p
     assert np.allclose(e, 100 * sums / n_p, rtol=1e-3)
     assert np.argmin(e) == 0, "the true pose explains the depth best"
+
+
+def test_silhouette_term_charges_the_model_pixels_no_observation_confirms(body, scene):
+    """E_S (the shape fit's, w_S > 0) against Open3D ray casting counted in numpy: T for every
+    rendered pixel with no observation within T of it, normalised as E_D. The true pose's pixels
+    all lie on the person; moved limbs cover the wall 1.5 m behind and pay; w_S = 0 leaves E
+    and the published parts as they were."""
+    h, depth = scene
+    scorer = ParticleScorer(body, INTR, (64, 64))
+    plain = ObjectiveWeights(depth=1.0, joints=0.0, penetration=0.0)
+    off, on = Objective(body, INTR, scorer, plain), Objective(body, INTR, scorer, replace(plain, silhouette=2.0))
+    box = box_around(INTR.project(body.pose(h[None])[0]), margin=0.15)
+    targets = JointTargets.from_detection(detection_of(body, h), depth, INTR, body)
+    rng = np.random.default_rng(7)
+    hs = np.repeat(h[None], 6, axis=0)
+    hs[1:, 7:] += rng.normal(0, 0.3, (5, 29))
+    hs[1:, :3] += rng.normal(0, 0.05, (5, 3))
+    off.set_frame(depth, box, targets, h)
+    e_off = off(hs)
+    on.set_frame(depth, box, targets, h)
+    e_on = on(hs)
+    tiles = raycast_tiles(body.pose(hs), body.triangles, scorer.tile_box.rays(INTR))
+    _, counts = reference_score(tiles, scorer.observed, 0.3)
+    unconfirmed = counts["rendered"] - counts["close"]
+    want = 100 * 0.3 * unconfirmed / on.normaliser
+    np.testing.assert_allclose(on.last_parts["E_S"], want, rtol=0.02, atol=0.5)  # raster against ray cast: edges
+    np.testing.assert_allclose(e_on - e_off, 2.0 * on.last_parts["E_S"], rtol=1e-9, atol=1e-9)
+    assert want[0] < 0.05 * want[1:].min(), want  # the person's own pose covers only the person
+    assert "E_S" not in off.last_parts
 
 
 def test_joint_terms_by_hand(body, scene):
