@@ -4,7 +4,10 @@ Input: samples of one person (a frame, its detection and the pose the tracker fo
 shape space's start body). :func:`fit_shape` chooses ``keyframes`` well-spread frames, then:
 
 0. **Sweep.** A coarse grid (:data:`SWEEP`: gender × height) of shapes, each with its own pose
-   step, picks the start: poses tracked with the start body favour shapes like it.
+   step, picks the start: poses tracked with the start body favour shapes like it. Its heights
+   are fixed, so E_H favours the candidate nearest the measured stature whatever its build
+   (female-short started male); candidates moved to the stature instead fixed that subject and
+   no count (BENCHMARKS.md, personalisation eighth part).
 1. **Shape step.** A PSO over the space's parameters (:class:`~swarmpose.body.shape_space.ShapeSpace`)
    with the poses held, minimising the mean over the key frames of ``E + w_D·E_S`` (the
    tracker's objective E with its own weights, penetration term included, plus the silhouette
@@ -30,7 +33,8 @@ is charged too, so fit from a recording where the person is in full view. The fi
 their edge dropouts filled first (:func:`~swarmpose.tracking.depth_dropouts.fill_dropouts`),
 which E_S would otherwise charge as empty space and shrink the body by (the observed bone lengths
 are lifted on the filled depth too; the pose step, the stature measure and the online collection's
-hidden share still read the frames as they are).
+hidden share still read the frames as they are: a pose step on E + w_D·E_S and the filled depth
+measured no better, BENCHMARKS.md, personalisation eighth part).
 
 E_B, the bone-length term: the poses held during a shape step were fitted with the previous
 shape, and a body too short can bend and lean to explain them (female-tall came out 5 cm short
