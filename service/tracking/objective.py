@@ -102,7 +102,8 @@ class ObjectiveWeights:
     detected left/right pairs may match the model crossed, and w_P (per cm of an elbow or
     wrist inside the torso), w_A (per rad² of the arms' angles away from the rest pose), w_S
     (per cm of E_S, the model's pixels no observation within T confirms: the shape fit's
-    silhouette term, see :mod:`~swarmpose.tracking.personalise`; 0 in tracking)."""
+    silhouette term, see :mod:`~swarmpose.tracking.personalise`; 0 in tracking). E_S applies
+    only where the depth term does (w_D > 0 and depth in the box)."""
 
     depth: float = 3.0
     joints: float = 1.0
@@ -213,9 +214,9 @@ class Objective:
     Per frame call :meth:`set_frame`; then ``objective(h)`` returns E (P,) and
     :attr:`last_parts` holds E_D, E_J2D, E_J3D, E_J, E_P, E_A (and E_S where w_S > 0) (P,) of the
     last call. One launch of the scorer computes all the terms (forward kinematics, the depth
-    term, and the joint and penetration terms from the named points, cl/include/joint_term.h,
-    and the pixel counts E_S needs); :meth:`host_terms` is
-    the numpy oracle of the latter. :attr:`spent_s` accumulates where the calls' time went (s):
+    term and the pixel counts E_S needs, and the joint and penetration terms from the named
+    points, cl/include/joint_term.h, of which :meth:`host_terms` is the numpy oracle).
+    :attr:`spent_s` accumulates where the calls' time went (s):
     ``score`` (the launch and its wait: forward kinematics and every term on the device),
     ``joints`` (combining the terms on the host), and ``calls``.
 

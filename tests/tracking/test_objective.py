@@ -120,6 +120,7 @@ def test_silhouette_term_charges_the_model_pixels_no_observation_confirms(body, 
     np.testing.assert_allclose(on.last_parts["E_S"], want, rtol=0.02, atol=0.5)  # raster against ray cast: edges
     np.testing.assert_allclose(e_on - e_off, 2.0 * on.last_parts["E_S"], rtol=1e-9, atol=1e-9)
     assert want[0] < 0.05 * want[1:].min(), want  # the person's own pose covers only the person
+    assert want[1:].min() > 10 * 0.5, want  # far above the tolerance: counting "both" (≈ 0 here) would fail
     assert "E_S" not in off.last_parts
 
 
