@@ -334,10 +334,9 @@ class Objective:
         """(P,) cm: E_S, T for each of the tile's rendered pixels that no observation within T
         confirms (``rendered - close``), normalised as E_D on ``scorer``'s level.
 
-        E_D charges an observed pixel the model misses, but not a model pixel where nothing is
-        seen or where the sensor sees farther than T behind it: a wall behind the person costs T
-        whether the model covers it or not, so a body can grow for free. The shape fit adds this
-        term (a body too large then costs); tracking leaves it off."""
+        E_D charges an observed pixel the model misses, not a model pixel over nothing or over a
+        wall farther than T behind it (which costs T covered or not), so a body can grow for free;
+        the shape fit adds this term, tracking leaves it off."""
         normaliser = self.normaliser if scorer is self.scorer else self.coarse_normaliser
         unconfirmed = (counts["rendered"] - counts["close"]).astype(float)
         return 100.0 * scorer.threshold * unconfirmed / normaliser
