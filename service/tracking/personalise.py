@@ -94,7 +94,7 @@ from swarmpose.tracking.body_tracker import BodyTracker, observed_depth
 from swarmpose.tracking.config import TrackerConfig
 from swarmpose.tracking.depth_dropouts import fill_dropouts
 from swarmpose.tracking.lift_bias import LIMB_BONES, lift_bias, typical_depth
-from swarmpose.tracking.objective import JointTargets, Objective, ObjectiveWeights
+from swarmpose.tracking.objective import JointTargets, Objective
 from swarmpose.tracking.pso import PsoConfig, minimise
 
 log = logging.getLogger(__name__)
@@ -238,17 +238,17 @@ def spread_frames(poses: Sequence[np.ndarray], count: int) -> list[int]:
 
 
 class _KeyFrame:
-    """One key frame's objective (the fit's weights: E_S on), on a scorer of its own that keeps
-    the frame's observation (its depth with dropouts filled)."""
+    """One key frame's objective (the tracker's weights with E_S on at w_S = w_D), on a scorer of
+    its own that keeps the frame's observation (its depth with dropouts filled)."""
 
     def __init__(self, sample: ShapeSample, body: SkinnedBody, intrinsics: Intrinsics, config: TrackerConfig,
-                 weights: ObjectiveWeights, tile: tuple[int, int], context: ClContext, tracker: BodyTracker):
+                 tile: tuple[int, int], context: ClContext, tracker: BodyTracker):
         self.sample, self.pose = sample, np.asarray(sample.pose, float)
         try:
             scorer = ParticleScorer(body, intrinsics, tile, threshold=config.threshold_m, context=context)
         except ConfigError:  # the fit's finer tile needs more local memory than the device has (GPUs)
             scorer = ParticleScorer(body, intrinsics, config.tile, threshold=config.threshold_m, context=context)
-        self.objective = Objective(body, intrinsics, scorer, weights)
+        self.objective = Objective(body, intrinsics, scorer, replace(config.weights, silhouette=config.weights.depth))
         depth = fitting_depth(sample.frame)
         targets = JointTargets.from_detection(sample.joints, depth, intrinsics, body, config.min_score)
         self.objective.set_frame(depth, tracker.search_box(self.pose, targets), targets, self.pose)
@@ -292,9 +292,8 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
     x = space.start
     body = space.fitting_body(x)
     tracker = BodyTracker(body, intrinsics, config, context)
-    weights = replace(config.weights, silhouette=config.weights.depth)  # the shape step's E + w_D·E_S
     chosen = spread_frames([s.pose for s in usable], settings.keyframes)
-    keys = [_KeyFrame(usable[k], body, intrinsics, config, weights, settings.tile, context, tracker) for k in chosen]
+    keys = [_KeyFrame(usable[k], body, intrinsics, config, settings.tile, context, tracker) for k in chosen]
     rng = np.random.default_rng(settings.seed)
     pso = PsoConfig(particles=settings.particles, generations=settings.generations, variant="canonical")
     span = space.upper - space.lower
