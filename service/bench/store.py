@@ -9,7 +9,7 @@ import os
 from pathlib import Path
 
 TRACKER_DEFAULTS = {"particles": 64, "generations": 64, "max_people": 1, "arm_prior": 0.0, "limb_flips": True,
-                    "hidden_lifts": True, "arm_proposals": True, "hypotheses": 2, "backward": 0}
+                    "hidden_lifts": True, "arm_proposals": True, "hypotheses": 2, "backward": 0, "polish": 0}
 """The tracker settings every record stores, so that a resume compares them even when the
 caller left them at their defaults (``bench utdmhad`` adds ``auto_height``, which the matrix's
 given shapes never use)."""
@@ -28,11 +28,12 @@ def tracker_settings(tracker: dict | None) -> dict:
 def mode_settings(tracker: dict, mode: str) -> dict:
     """The settings a ``mode``'s record is made and resumed with: ``arm_proposals`` off where it does
     nothing (the joints and lift modes have no depth term to judge them), ``hypotheses`` and
-    ``backward`` 0 in the lift mode (no search, no body), so that their records made before the
-    setting existed still match."""
+    ``backward`` and ``polish`` 0 in the lift mode (no search, no body), so that their records made
+    before the setting existed still match."""
     return {**tracker, "arm_proposals": bool(tracker.get("arm_proposals", True)) and mode not in ("joints", "lift"),
             "hypotheses": 0 if mode == "lift" else int(tracker.get("hypotheses", TRACKER_DEFAULTS["hypotheses"])),
-            "backward": 0 if mode == "lift" else int(tracker.get("backward", TRACKER_DEFAULTS["backward"]))}
+            "backward": 0 if mode == "lift" else int(tracker.get("backward", TRACKER_DEFAULTS["backward"])),
+            "polish": 0 if mode == "lift" else int(tracker.get("polish", TRACKER_DEFAULTS["polish"]))}
 
 
 def seeded(settings: dict, seed: int) -> tuple[dict, str]:

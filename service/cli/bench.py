@@ -70,7 +70,7 @@ def cmd_bench_accuracy(args: argparse.Namespace) -> int:
     tracker = {"particles": args.particles, "generations": args.generations, "max_people": args.max_people,
                "arm_prior": args.arm_prior, "limb_flips": args.limb_flips, "hidden_lifts": args.hidden_lifts,
                "arm_proposals": args.arm_proposals, "hypotheses": args.hypotheses,
-               "backward": args.backward}
+               "backward": args.backward, "polish": args.polish}
     records = run_matrix(Path(args.out), subset=args.subset, detectors=args.detectors, modes=args.modes,
                          frames=args.frames, tracker=tracker, assets=args.assets, progress=not quiet(args),
                          seeds=args.seeds)
@@ -92,7 +92,7 @@ def cmd_bench_utdmhad(args: argparse.Namespace) -> int:
     tracker = {"particles": args.particles, "generations": args.generations, "arm_prior": args.arm_prior,
                "limb_flips": args.limb_flips, "hidden_lifts": args.hidden_lifts, "auto_height": args.auto_height,
                "arm_proposals": args.arm_proposals, "hypotheses": args.hypotheses,
-               "backward": args.backward}
+               "backward": args.backward, "polish": args.polish}
     records = run_utdmhad(Path(args.out), modes=args.modes, detectors=args.detectors, shapes=args.shapes,
                           frames=args.frames, tracker=tracker, subjects=args.subjects,
                           actions=tuple(int(a) for a in args.actions), assets=args.assets,
@@ -130,8 +130,8 @@ def _add_assets(p: argparse.ArgumentParser) -> None:
 
 
 def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
-    """--arm-prior, --limb-flips, --hidden-lifts, --arm-proposals, --hypotheses and --backward of the resumable tracking
-    benchmarks (a record keeps them, so a resume with other values tracks again)."""
+    """--arm-prior, --limb-flips, --hidden-lifts, --arm-proposals, --hypotheses, --backward and --polish of the
+    resumable tracking benchmarks (a record keeps them, so a resume with other values tracks again)."""
     p.add_argument("--arm-prior", type=non_negative_float, default=0.0,
                    help="the tracker's w_A (cost per rad² of the arms away from rest, times how side on the "
                         "person stands; 0 = off, the tracker's default)")
@@ -149,6 +149,8 @@ def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
     p.add_argument("--backward", type=non_negative_int, default=0, metavar="N",
                    help="the offline backward pass: every N frames each track run backwards over them from its "
                         "last solution (0: off, the tracker's default; N >= --frames: the whole sequence)")
+    p.add_argument("--polish", type=non_negative_int, default=0, metavar="N",
+                   help="N rounds of the local polish after each frame's search (0: off, the tracker's default)")
 
 
 def _add_budget_and_assets(p: argparse.ArgumentParser) -> None:

@@ -20,7 +20,8 @@ Per frame (:meth:`BodyTracker.step`):
    turned to each of four facings (side and back views make its facing unreliable), starts one
    PSO over wide angle ranges each; the best fit by the objective is the centre of the normal
    search, the others join it as particles. No manual initialisation.
-3. **Search**. PSO (canonical or perturbed) of ``E = w_D·E_D + w_J·E_J``.
+3. **Search**. PSO (canonical or perturbed) of ``E = w_D·E_D + w_J·E_J``; with ``polish``, a local
+   search then takes the best pose's root, trunk and legs further down E (:mod:`~swarmpose.tracking.pose_polish`).
 4. **Verdict** (:mod:`swarmpose.tracking.verdict`): lost or not, and per-joint confidence.
    Frames with no usable joints and no previous solution, or with neither joints nor
    depth, are *lost* with the reason; the next frame then starts from J^e again.
@@ -57,6 +58,7 @@ from swarmpose.tracking.lift import lift_eval_joints
 from swarmpose.tracking.limb_flips import limb_flips
 from swarmpose.tracking.objective import JointTargets, Objective, search_split
 from swarmpose.tracking.one_euro import PoseFilter
+from swarmpose.tracking.pose_polish import WITHOUT_ARMS, polish_pose
 from swarmpose.tracking.pso import PsoConfig, PsoResult, minimise
 from swarmpose.tracking.result import BodyResult, lost_body
 
@@ -159,9 +161,7 @@ class BodyTracker:
     def reset(self) -> None:
         """Forget the track: the next frame initialises from its detection."""
         self.history.clear()
-        self.previous = None
-        self.age = 0
-        self.challenger = None
+        self.previous, self.age, self.challenger = None, 0, None
         if self.filter is not None:
             self.filter.reset()
 
@@ -181,7 +181,6 @@ class BodyTracker:
             pts.append(np.array([lo - grow, hi + grow]))
         return box_around(np.concatenate(pts), margin=0.1)
 
-    # ------------------------------------------------------------------ per frame
     def step(self, frame: Frame, joints: Joints2D | None, others_removed: bool = False,
              start_min_score: float | None = None) -> BodyResult:
         """Track one frame with its detection (None: no detector output for it). others_removed:
@@ -265,6 +264,7 @@ class BodyTracker:
         timings["pso"] = 1000 * (time.perf_counter() - t1) - timings.get("hypotheses", 0.0)
         timings.update(search_split(self.objective.take_spent(), timings["pso"]))
         best = result.best if state == "init" else self._hold_facing(result)
+        best = polish_pose(self.objective, best, self.config.polish, rng, WITHOUT_ARMS)[0]  # polish 0: as it is
         self.objective(best[None])
         parts = {k: float(v[0]) for k, v in self.objective.last_parts.items()}
         tile, counts = self._render(best)

@@ -21,6 +21,7 @@ from swarmpose.sources.base import Frame
 from swarmpose.sources.groundtruth import load_ground_truth
 from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.config import TrackerConfig
+from swarmpose.tracking.pose_polish import WITHOUT_ARMS
 from swarmpose.tracking.result import FrameResult
 
 FRAMES = 6
@@ -266,3 +267,14 @@ def test_the_best_hypotheses_search_in_sub_swarms_of_their_own(body, sequence, m
             assert len(rows) == size and rows[-1] == len(start) - (label - 1) * size - 1
             changed = set(np.flatnonzero(np.abs(start[rows[0]] - start[0]) > 1e-12).tolist())
             assert changed and any(changed <= limb for limb in limbs), changed
+
+
+def test_the_polish_takes_the_searched_pose_further_down_and_leaves_the_arms(body, sequence):
+    frame, det = next(frames_of(sequence))
+    intr = Intrinsics.load(sequence / "intrinsic.json")
+    plain = BodyTracker(body, intr, TrackerConfig(**SMALL)).step(frame, det)
+    polished = BodyTracker(body, intr, TrackerConfig(**SMALL, polish=40)).step(frame, det)
+    arms = ~WITHOUT_ARMS
+    assert np.array_equal(polished.pose[arms], plain.pose[arms])  # the same search, the arms as it left them
+    assert polished.objective["E"] < plain.objective["E"], (polished.objective["E"], plain.objective["E"])
+    assert np.any(polished.pose[WITHOUT_ARMS] != plain.pose[WITHOUT_ARMS])
