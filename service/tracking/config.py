@@ -71,7 +71,7 @@ class TrackerConfig:
                                        "occluder); the 2D term keeps it")
     polish: int = setting(0, "after each frame's search, this many rounds of a local search (32 poses each) take "
                              "the best pose's root, spine, neck and legs further down the same objective; the arms "
-                             "stay the search's (0 = off; 60 measured best, BENCHMARKS.md)", minimum=0)
+                             "stay the search's (0 = off; 60 measured, BENCHMARKS.md)", minimum=0)
     backward: int = setting(0, "offline runs (track, eval, the Python API's track): every this many frames, each "
                                "person's track is run backwards over them from its last solution, and those "
                                "frames get the backward fit, published this many frames late (a track's start "

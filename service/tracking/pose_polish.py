@@ -3,8 +3,8 @@
 The tracker's per-frame search (a PSO spread around the previous pose at its frame budget) stops
 short of the frame's minimum: on the personalisation bench's neutral walk, tracked at p = g = 32
 with the subject's own body, 12 frames' tracked poses scored 10-23 above the true poses on the
-shape fit's objective, their joints 43-59 mm off; 60 rounds of this polish took them to 3-6
-above, 23-35 mm off (BENCHMARKS.md, several people, third part). Each round moves a random
+shape fit's objective, their joints 43-59 mm off; 60 rounds of this polish took the first six of
+them to 3-6 above, 23-35 mm off (BENCHMARKS.md, several people, third part). Each round moves a random
 quarter of the movable coordinates of λ copies of the current pose by Gaussian steps (root
 translation m, root quaternion and joint angles rad), keeps the best copy if it beats the current
 pose, and widens the steps after a success and narrows them after a failure. Poses stay within
@@ -13,6 +13,8 @@ the angle limits, quaternions unit length; the result is never worse than the st
 The tracker (``polish`` setting) moves everything but the arms (:data:`WITHOUT_ARMS`): polished
 too, a side-on arm followed the detector's wrong keypoints more closely (the 3-person crossing's
 female walker 79.7 → 86.8 mm over three seeds, against 73.5 mm with the arms left to the search).
+The shape fit's pose step runs without it (a polish of its key frames measured no better:
+BENCHMARKS.md, personalisation ninth part).
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ def polish_pose(objective: Callable[[np.ndarray], np.ndarray], pose: np.ndarray,
     lo, hi = pose_bounds()
     best = np.asarray(pose, float).copy()
     best_value = float(np.asarray(objective(best[None]), float)[0])
+    best_value = best_value if np.isfinite(best_value) else np.inf  # a NaN start: any finite copy beats it
     step = np.full(best.shape, STEP_ANGLE_RAD)
     step[:3], step[3:7] = STEP_ROOT_M, STEP_ANGLE_RAD / 2
     scale = 1.0

@@ -61,5 +61,25 @@ def test_coordinates_not_movable_stay_exactly_and_no_rounds_change_nothing():
     assert np.array_equal(best[arms], start[arms])
     assert value < objective(start[None])[0]
     assert np.any(best[WITHOUT_ARMS] != start[WITHOUT_ARMS])
-    same, nothing = polish_pose(objective, start, 0, np.random.default_rng(1))
-    assert np.array_equal(same, start) and np.isnan(nothing)
+    counted, calls = bowl(target, np.full(36, 0.05))
+    same, nothing = polish_pose(counted, start, 0, np.random.default_rng(1))
+    assert np.array_equal(same, start) and np.isnan(nothing) and calls == []
+
+
+def test_a_minimum_beyond_the_angle_limits_is_met_at_the_limits_and_non_finite_values_never_win():
+    rng = np.random.default_rng(7)
+    lo, hi = pose_bounds()
+    start = a_pose(rng)
+    target = start.copy()
+    target[7:] = hi[7:] + 0.5  # every angle's minimum lies past its upper limit
+    bowl_of, _ = bowl(target, np.full(36, 0.05))
+
+    def objective(poses: np.ndarray) -> np.ndarray:  # NaN for a third of the copies, and at the start
+        values = bowl_of(poses)
+        values[::3] = np.nan
+        return values
+
+    best, value = polish_pose(objective, start, 150, np.random.default_rng(2))
+    assert np.isfinite(value) and np.isclose(value, bowl_of(best[None])[0])
+    assert np.all(best[7:] <= hi[7:]) and np.all(best[7:] >= lo[7:])
+    assert np.mean(hi[7:] - best[7:]) < 0.25 * np.mean(hi[7:] - start[7:])  # pressed towards the limits
