@@ -30,10 +30,10 @@ def mode_settings(tracker: dict, mode: str) -> dict:
     nothing (the joints and lift modes have no depth term to judge them), ``hypotheses`` and
     ``backward`` and ``polish`` 0 in the lift mode (no search, no body), so that their records made
     before the setting existed still match."""
+    searched = {k: 0 if mode == "lift" else int(tracker.get(k, TRACKER_DEFAULTS[k]))
+                for k in ("hypotheses", "backward", "polish")}
     return {**tracker, "arm_proposals": bool(tracker.get("arm_proposals", True)) and mode not in ("joints", "lift"),
-            "hypotheses": 0 if mode == "lift" else int(tracker.get("hypotheses", TRACKER_DEFAULTS["hypotheses"])),
-            "backward": 0 if mode == "lift" else int(tracker.get("backward", TRACKER_DEFAULTS["backward"])),
-            "polish": 0 if mode == "lift" else int(tracker.get("polish", TRACKER_DEFAULTS["polish"]))}
+            **searched}
 
 
 def seeded(settings: dict, seed: int) -> tuple[dict, str]:

@@ -68,9 +68,7 @@ def _names(allowed: tuple[str, ...]):
 def cmd_bench_accuracy(args: argparse.Namespace) -> int:
     """The tracker over the benchmark matrix: per cell and mode Δ, A(100), lost frames, facing."""
     tracker = {"particles": args.particles, "generations": args.generations, "max_people": args.max_people,
-               "arm_prior": args.arm_prior, "limb_flips": args.limb_flips, "hidden_lifts": args.hidden_lifts,
-               "arm_proposals": args.arm_proposals, "hypotheses": args.hypotheses,
-               "backward": args.backward, "polish": args.polish}
+               **_tracker_switches(args)}
     records = run_matrix(Path(args.out), subset=args.subset, detectors=args.detectors, modes=args.modes,
                          frames=args.frames, tracker=tracker, assets=args.assets, progress=not quiet(args),
                          seeds=args.seeds)
@@ -89,10 +87,8 @@ def cmd_bench_accuracy(args: argparse.Namespace) -> int:
 
 def cmd_bench_utdmhad(args: argparse.Namespace) -> int:
     """The tracker on UTD-MHAD's real Kinect sequences against the Kinect skeleton."""
-    tracker = {"particles": args.particles, "generations": args.generations, "arm_prior": args.arm_prior,
-               "limb_flips": args.limb_flips, "hidden_lifts": args.hidden_lifts, "auto_height": args.auto_height,
-               "arm_proposals": args.arm_proposals, "hypotheses": args.hypotheses,
-               "backward": args.backward, "polish": args.polish}
+    tracker = {"particles": args.particles, "generations": args.generations, "auto_height": args.auto_height,
+               **_tracker_switches(args)}
     records = run_utdmhad(Path(args.out), modes=args.modes, detectors=args.detectors, shapes=args.shapes,
                           frames=args.frames, tracker=tracker, subjects=args.subjects,
                           actions=tuple(int(a) for a in args.actions), assets=args.assets,
@@ -151,6 +147,12 @@ def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
                         "last solution (0: off, the tracker's default; N >= --frames: the whole sequence)")
     p.add_argument("--polish", type=non_negative_int, default=0, metavar="N",
                    help="N rounds of the local polish after each frame's search (0: off, the tracker's default)")
+
+
+def _tracker_switches(args: argparse.Namespace) -> dict:
+    """The values of :func:`_add_tracker_switches`' options, by their tracker setting's name."""
+    names = ("arm_prior", "limb_flips", "hidden_lifts", "arm_proposals", "hypotheses", "backward", "polish")
+    return {name: getattr(args, name) for name in names}
 
 
 def _add_budget_and_assets(p: argparse.ArgumentParser) -> None:

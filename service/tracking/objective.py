@@ -330,16 +330,15 @@ class Objective:
         inside = np.maximum(self.torso_radius - np.linalg.norm(arms - nearest, axis=2), 0.0)
         return 100.0 * inside.sum(axis=1)
 
-    def silhouette_cm(self, counts: dict[str, np.ndarray], scorer) -> np.ndarray:
+    def silhouette_cm(self, counts: dict[str, np.ndarray], normaliser: float) -> np.ndarray:
         """(P,) cm: E_S, T for each of the tile's rendered pixels that no observation within T
-        confirms (``rendered - close``), normalised as E_D on ``scorer``'s level.
+        confirms (``rendered - close``), divided like E_D by ``normaliser`` (the active level's N_P).
 
         E_D charges an observed pixel the model misses, not a model pixel over nothing or over a
         wall farther than T behind it (which costs T covered or not), so a body can grow for free;
         the shape fit adds this term, tracking leaves it off."""
-        normaliser = self.normaliser if scorer is self.scorer else self.coarse_normaliser
         unconfirmed = (counts["rendered"] - counts["close"]).astype(float)
-        return 100.0 * scorer.threshold * unconfirmed / normaliser
+        return 100.0 * self.scorer.threshold * unconfirmed / normaliser
 
     @property
     def _swap_px(self) -> float:
@@ -391,13 +390,13 @@ class Objective:
         t1 = time.perf_counter()
         w = self.weights
         zeros = np.zeros(len(result.sums))
-        e_d = 100.0 * result.sums / (self.normaliser if scorer is self.scorer else self.coarse_normaliser) \
-            if self.uses_depth else zeros
+        normaliser = self.normaliser if scorer is self.scorer else self.coarse_normaliser
+        e_d = 100.0 * result.sums / normaliser if self.uses_depth else zeros
         e_2d, e_3d = (result.terms["E_J2D"], result.terms["E_J3D"]) if self.uses_joints else (zeros, zeros)
         e_j = w.alpha * e_2d + (1.0 - w.alpha) * e_3d
         e_p = result.terms["E_P"] if w.penetration > 0 else zeros
         e_a = self.arm_prior_rad2(h) if w.arm_prior > 0 else zeros
-        e_s = self.silhouette_cm(result.counts, scorer) if w.silhouette > 0 and self.uses_depth else zeros
+        e_s = self.silhouette_cm(result.counts, normaliser) if w.silhouette > 0 and self.uses_depth else zeros
         total = (w.depth * e_d + w.joints * e_j + w.penetration * e_p + w.arm_prior * self.arm_prior_scale * e_a
                  + w.silhouette * e_s)
         self.last_parts = {"E": total, "E_D": e_d, "E_J": e_j, "E_J2D": e_2d, "E_J3D": e_3d, "E_P": e_p, "E_A": e_a}
