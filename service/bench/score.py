@@ -43,10 +43,16 @@ def _scene(body, rng: np.random.Generator, particles: int, intr: Intrinsics):
     depth = Renderer(intr).render(body.pose(h_true[None])[0], body.triangles, room)[0]
     depth = (depth + rng.normal(0.0, 0.005, depth.shape) * (depth > 0)).astype(np.float32)
     depth[rng.random(depth.shape) < 0.05] = 0.0
+    return h_true, hypotheses_around(h_true, rng, particles), depth
+
+
+def hypotheses_around(h_true: np.ndarray, rng: np.random.Generator, particles: int) -> np.ndarray:
+    """P poses (P, 36) scattered about ``h_true`` (36,): the joint angles by N(0, 0.15 rad),
+    the root position by N(0, 3 cm), the root rotation kept (a generation of a search)."""
     h = np.tile(h_true, (particles, 1))
     h[:, 7:] += rng.normal(0.0, 0.15, (particles, 29))
     h[:, :3] += rng.normal(0.0, 0.03, (particles, 3))
-    return h_true, h, depth
+    return h
 
 
 def _median(rows: list[dict], key: str) -> float:
