@@ -15,12 +15,14 @@ and ``x_b`` its posed head.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
 from swarmpose.body.skeleton import (
     ANGLES,
+    N_ANGLES,
     POSE_DIM,
     ROOT_QUATERNION,
     ROOT_TRANSLATION,
@@ -120,8 +122,9 @@ def shortest_arc(src, dst) -> np.ndarray:
     return np.eye(3) + np.where(opposite[..., None, None], 0.0, k) + (k @ k) * scale[..., None, None]
 
 
-def rotation_power(rot: np.ndarray, fraction: float) -> np.ndarray:
-    """``rot ** fraction`` (..., 3, 3): the same axis, ``fraction`` of the angle (< pi)."""
+def rotation_power(rot: np.ndarray, fraction: float | np.ndarray) -> np.ndarray:
+    """``rot ** fraction`` (..., 3, 3): the same axis, ``fraction`` of the angle (< pi);
+    ``fraction`` a number or an array broadcasting against ``rot.shape[:-2]``."""
     q = matrix_to_quaternion(rot)
     half = np.arccos(np.clip(q[..., 0], -1.0, 1.0))
     sin_half = np.sin(half)
@@ -143,18 +146,43 @@ def compose_joint(joint, angles: np.ndarray) -> np.ndarray:
     return rot
 
 
+@functools.lru_cache(maxsize=1)
+def _dof_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The 29 DOFs' Rodrigues terms and each joint's composition order, built once.
+
+    Returns ``skew`` (30, 3, 3) and ``outer`` (30, 3, 3) of the unit axes (row 29: an extra
+    DOF whose angle is always 0, i.e. the identity) and ``steps`` (14, 3) int: the DOF rows
+    of :func:`compose_joint`'s factors per joint, padded with 29."""
+    axes = np.array([[0.0, 0.0, 1.0]] * (N_ANGLES + 1))
+    steps = np.full((len(TRACKING_JOINTS), 3), N_ANGLES, np.int64)
+    for ji, joint in enumerate(TRACKING_JOINTS):
+        first = angle_offset(joint.name)
+        kinds = [d.kind for d in joint.dofs]
+        for k, dof in enumerate(joint.dofs):
+            axes[first + k] = dof.axis
+        steps[ji, :len(joint.compose)] = [first + kinds.index(kind) for kind in joint.compose]
+    skew, outer = np.zeros((N_ANGLES + 1, 3, 3)), np.zeros((N_ANGLES + 1, 3, 3))
+    for i, axis in enumerate(axes):
+        a = axis / np.linalg.norm(axis)
+        skew[i] = [[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]]
+        outer[i] = np.outer(a, a)
+    return skew, outer, steps
+
+
 def joint_rotations(angles: np.ndarray, fraction: float = 1.0) -> np.ndarray:
     """Canonical-frame joint rotations ``E_j`` (P, 14, 3, 3) from angles (P, 29) rad.
 
-    ``E_j`` is :func:`compose_joint` of the joint's DOFs (see skeleton). With ``fraction``
+    ``E_j`` is :func:`compose_joint` of the joint's DOFs (see skeleton), computed for all
+    joints at once (the same products in the same order, bit for bit). With ``fraction``
     f < 1 it returns ``E_j ** f`` (same axis, f of the angle), so that k bones sharing a
     joint with f = 1/k compose to exactly ``E_j``.
     """
     angles = np.asarray(angles, dtype=np.float64)
-    out = np.empty(angles.shape[:-1] + (len(TRACKING_JOINTS), 3, 3))
-    for ji, joint in enumerate(TRACKING_JOINTS):
-        first = angle_offset(joint.name)
-        out[..., ji, :, :] = compose_joint(joint, angles[..., first:first + len(joint.dofs)])
+    skew, outer, steps = _dof_tables()
+    padded = np.concatenate([angles, np.zeros(angles.shape[:-1] + (1,))], axis=-1)
+    c, s = np.cos(padded)[..., None, None], np.sin(padded)[..., None, None]
+    dof = np.eye(3) * c + s * skew + (1 - c) * outer  # (P, 30, 3, 3), row 29 the identity
+    out = (dof[..., steps[:, 0], :, :] @ dof[..., steps[:, 1], :, :]) @ dof[..., steps[:, 2], :, :]
     return out if fraction == 1.0 else rotation_power(out, fraction)
 
 
@@ -201,32 +229,56 @@ def as_poses(h: np.ndarray) -> np.ndarray:
     return h
 
 
+@functools.lru_cache(maxsize=16)
+def _bone_levels(parents: bytes) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+    """The bones (after the root) grouped by depth in the tree: per level (bones, their
+    parents), int arrays; ``parents`` is the (B,) int64 parent array's bytes."""
+    par = np.frombuffer(parents, dtype=np.int64)
+    depth = np.zeros(len(par), np.int64)
+    for bone in range(1, len(par)):
+        depth[bone] = depth[par[bone]] + 1
+    return tuple((np.flatnonzero(depth == d), par[depth == d]) for d in range(1, int(depth.max(initial=0)) + 1))
+
+
+@functools.lru_cache(maxsize=16)
+def _bone_shares(joints: bytes, fractions: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Which bones (after the root) take a whole joint rotation and which a power of one.
+
+    Returns ``whole`` (bones), ``whole_joint`` (their joints), ``part`` (bones), and the
+    distinct (joint, fraction) pairs of ``part`` as ``pair_joint``, ``pair_fraction``
+    indexed by ``part``'s order through :func:`np.unique`'s inverse (in the last array)."""
+    joint = np.frombuffer(joints, dtype=np.int64)
+    fraction = np.frombuffer(fractions, dtype=np.float64)
+    moved = (joint >= 0) & (np.arange(len(joint)) > 0)
+    whole = np.flatnonzero(moved & (fraction == 1.0))
+    part = np.flatnonzero(moved & (fraction != 1.0))
+    pairs, inverse = np.unique(np.stack([joint[part], fraction[part]], -1).reshape(-1, 2), axis=0,
+                               return_inverse=True)
+    return whole, joint[whole], part, pairs, inverse.reshape(-1)
+
+
 def canonical_rotations(parents: np.ndarray, bone_joint: np.ndarray, bone_fraction: np.ndarray,
                         root: np.ndarray, angles: np.ndarray) -> np.ndarray:
     """Canonical bone frames (P, B, 3, 3): ``W_b = W_parent E_j(f_b a_j)``, ``W_root = root``.
 
     root: (P, 3, 3) root rotations; angles: (P, 29) rad. At zero angles every frame
     equals the root's: zero angles are the T-pose of :mod:`swarmpose.body.skeleton`.
+    The bones of one depth in the tree are multiplied together.
     """
     p, b = angles.shape[0], len(parents)
+    whole, whole_joint, part, pairs, inverse = _bone_shares(np.asarray(bone_joint, dtype=np.int64).tobytes(),
+                                                            np.asarray(bone_fraction, dtype=np.float64).tobytes())
     full = joint_rotations(angles)  # every joint once; bones sharing a joint take a power of it
-    shared: dict[tuple[int, float], np.ndarray] = {}
+    local = np.empty((p, b, 3, 3))
+    local[:] = np.eye(3)  # rigid bones: the parent's frame
+    local[:, whole] = full[:, whole_joint]
+    if len(part):  # each (joint, fraction) once: bones sharing it take the same power
+        powers = rotation_power(full[:, pairs[:, 0].astype(np.int64)], pairs[:, 1])
+        local[:, part] = powers[:, inverse]
     rot = np.empty((p, b, 3, 3))
     rot[:, 0] = root
-    for bone in range(1, b):
-        par = int(parents[bone])
-        j = int(bone_joint[bone])
-        if j < 0:
-            rot[:, bone] = rot[:, par]
-            continue
-        f = float(bone_fraction[bone])
-        if f == 1.0:
-            local = full[:, j]
-        else:
-            if (j, f) not in shared:
-                shared[(j, f)] = rotation_power(full[:, j], f)
-            local = shared[(j, f)]
-        rot[:, bone] = rot[:, par] @ local
+    for bones, above in _bone_levels(np.asarray(parents, dtype=np.int64).tobytes()):
+        rot[:, bones] = rot[:, above] @ local[:, bones]
     return rot
 
 
@@ -245,9 +297,9 @@ def forward_kinematics(rig: Rig, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     p, b = h.shape[0], len(rig.parents)
     pos = np.empty((p, b, 3))
     pos[:, 0] = h[:, ROOT_TRANSLATION]
-    for bone in range(1, b):
-        par = int(rig.parents[bone])
-        pos[:, bone] = pos[:, par] + rot[:, par] @ (rig.heads[bone] - rig.heads[par])
+    for bones, above in _bone_levels(np.asarray(rig.parents, dtype=np.int64).tobytes()):
+        offset = (rig.heads[bones] - rig.heads[above])[..., None]  # (n, 3, 1)
+        pos[:, bones] = pos[:, above] + (rot[:, above] @ offset)[..., 0]
     return rot, pos
 
 

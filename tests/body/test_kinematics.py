@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from conftest import MAKEHUMAN, needs_assets
 from scipy.spatial.transform import Rotation
 
 from swarmpose.body.kinematics import (
@@ -192,3 +193,56 @@ def test_non_finite_poses_and_zero_quaternions_are_rejected_by_row():
     h[3, 3:7] = 0.0
     with pytest.raises(ShapeError, match=r"poses \[1, 3\]"):
         forward_kinematics(_arm_rig(), h)
+
+
+def _loop_fk(rig: Rig, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Forward kinematics one joint DOF and one bone at a time (the textbook recursion, with
+    scipy's rotations): the oracle for the batched implementation."""
+    from swarmpose.body.skeleton import TRACKING_JOINTS
+
+    def joint_matrix(joint, angles):  # E = R(compose[0]) R(compose[1]) ..., scipy's rotvecs
+        kinds = [d.kind for d in joint.dofs]
+        rot = np.eye(3)
+        for kind in joint.compose:
+            dof = joint.dofs[kinds.index(kind)]
+            axis = np.asarray(dof.axis) / np.linalg.norm(dof.axis)
+            rot = rot @ Rotation.from_rotvec(axis * angles[kinds.index(kind)]).as_matrix()
+        return rot
+
+    rots, heads = [], []
+    for pose in h:
+        joints = [joint_matrix(j, pose[7 + angle_offset(j.name):]) for j in TRACKING_JOINTS]
+        frames = [Rotation.from_quat(pose[[4, 5, 6, 3]]).as_matrix()]
+        for bone in range(1, len(rig.parents)):
+            j, f = int(rig.bone_joint[bone]), float(rig.bone_fraction[bone])
+            local = np.eye(3) if j < 0 else Rotation.from_rotvec(
+                f * Rotation.from_matrix(joints[j]).as_rotvec()).as_matrix()
+            frames.append(frames[rig.parents[bone]] @ local)
+        rot = [w @ r.T for w, r in zip(frames, rig.rest_frames)]
+        pos = [pose[:3]]
+        for bone in range(1, len(rig.parents)):
+            par = rig.parents[bone]
+            pos.append(pos[par] + rot[par] @ (rig.heads[bone] - rig.heads[par]))
+        rots.append(rot)
+        heads.append(pos)
+    return np.array(rots), np.array(heads)
+
+
+@pytest.mark.parametrize("body", ["builtin", pytest.param("makehuman", marks=needs_assets)])
+def test_batched_fk_matches_a_bone_by_bone_recursion(body):
+    """The batched FK (every joint at once, the bones of one tree depth together) gives the
+    bone-by-bone recursion's rotations and heads, on both bodies' rigs (shared joints with
+    fractions, rigid bones), for one pose and for many."""
+    from swarmpose.body.loader import load_body
+
+    model = load_body("builtin" if body == "builtin" else f"makehuman:{MAKEHUMAN}", None)
+    rng = np.random.default_rng(3)
+    for count in (1, 9):
+        h = np.tile(model.rest_pose((0.1, 0.2, 3.0), (0.0, 1.0, 0.0, 0.0)), (count, 1))
+        h[:, 7:] += rng.normal(0.0, 0.5, (count, N_ANGLES))
+        h[:, 3:7] = rng.normal(size=(count, 4))
+        h[:, 3:7] /= np.linalg.norm(h[:, 3:7], axis=1, keepdims=True)
+        rot, pos = forward_kinematics(model.rig, h)
+        want_rot, want_pos = _loop_fk(model.rig, h)
+        np.testing.assert_allclose(rot, want_rot, atol=1e-9)
+        np.testing.assert_allclose(pos, want_pos, atol=1e-9)
