@@ -21,7 +21,7 @@ Per frame (:meth:`BodyTracker.step`):
    PSO over wide angle ranges each; the best fit by the objective is the centre of the normal
    search, the others join it as particles. No manual initialisation.
 3. **Search**. PSO (canonical or perturbed) of ``E = w_D·E_D + w_J·E_J``; with ``polish``, a local
-   search then takes the best pose's root, trunk and legs further down E (:mod:`~swarmpose.tracking.pose_polish`).
+   search then takes each facing's best pose further down E before they compete (:mod:`.pose_polish`).
 4. **Verdict** (:mod:`swarmpose.tracking.verdict`): lost or not, and per-joint confidence.
    Frames with no usable joints and no previous solution, or with neither joints nor
    depth, are *lost* with the reason; the next frame then starts from J^e again.
@@ -58,7 +58,7 @@ from swarmpose.tracking.lift import lift_eval_joints
 from swarmpose.tracking.limb_flips import limb_flips
 from swarmpose.tracking.objective import JointTargets, Objective, search_split
 from swarmpose.tracking.one_euro import PoseFilter
-from swarmpose.tracking.pose_polish import WITHOUT_ARMS, polish_pose
+from swarmpose.tracking.pose_polish import polish_solution
 from swarmpose.tracking.pso import PsoConfig, PsoResult, minimise
 from swarmpose.tracking.result import BodyResult, lost_body
 
@@ -114,8 +114,7 @@ class BodyTracker:
             self.objective = Objective(self.body, intrinsics, scorer, self.weights, self._coarse_scorer(context))
         self.history: list[np.ndarray] = []
         self.previous: np.ndarray | None = None
-        self.age = 0
-        """Frames tracked since the track's start (0 on the start's frame)."""
+        self.age = 0  # frames tracked since the track's start (0 on the start's frame)
         self.challenger: np.ndarray | None = None
         """Last frame's winning solution turned away from the track (see :data:`REPLACED_TURN_DEG`)."""
         self.best_counts: dict[str, np.ndarray] | None = None  # the last frame's, see _render
@@ -263,8 +262,8 @@ class BodyTracker:
         result = self._search(self.objective, start, rng, pso, groups)
         timings["pso"] = 1000 * (time.perf_counter() - t1) - timings.get("hypotheses", 0.0)
         timings.update(search_split(self.objective.take_spent(), timings["pso"]))
-        best = result.best if state == "init" else self._hold_facing(result)
-        best = polish_pose(self.objective, best, self.config.polish, rng, WITHOUT_ARMS)[0]  # polish 0: as it is
+        best = polish_solution(self.objective, result, self.previous, self.config.polish, rng,  # polish 0: as it is
+                               self.age < max(YOUNG_RECHECKS), self._hold_facing, REPLACED_TURN_DEG)  # young: a duel
         self.objective(best[None])
         parts = {k: float(v[0]) for k, v in self.objective.last_parts.items()}
         tile, counts = self._render(best)

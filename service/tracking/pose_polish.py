@@ -13,6 +13,14 @@ the angle limits, quaternions unit length; the result is never worse than the st
 The tracker (``polish`` setting) moves everything but the arms (:data:`WITHOUT_ARMS`): polished
 too, a side-on arm followed the detector's wrong keypoints more closely (the 3-person crossing's
 female walker 79.7 → 86.8 mm over three seeds, against 73.5 mm with the arms left to the search).
+On a young track's frames (ages 1-4, while the start's facings are re-checked) it polishes the best
+particle of each facing the swarm holds (:func:`polish_facings`: the track's, and a turned one that a
+re-check brought) before they compete. Polished only the winner, the track met the re-checks' other
+facing unpolished: a track started mirrored on a person seen from behind sat too deep for them to
+replace it (the regression subset's jumping jacks from behind locked at 2 of 4 seeds, 325 mm; with
+the young duel none of 4 did). On a settled track it polishes the chosen pose only
+(:func:`polish_solution`): a duel on every frame let a later re-check's mirrored facing, polished,
+flip a settled track (BENCHMARKS.md, several people, fifth part).
 The shape fit's pose step runs without it (a polish of its key frames measured no better:
 BENCHMARKS.md, personalisation ninth part).
 """
@@ -20,9 +28,12 @@ BENCHMARKS.md, personalisation ninth part).
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
+from swarmpose.body.kinematics import root_turn_deg
+from swarmpose.tracking.pso import PsoResult
 from swarmpose.tracking.search import LIMB_COLUMNS, pose_bounds, renormalise
 
 STEP_ROOT_M = 0.015
@@ -68,3 +79,44 @@ def polish_pose(objective: Callable[[np.ndarray], np.ndarray], pose: np.ndarray,
         else:
             scale *= 0.8
     return best, best_value
+
+
+def polish_facings(objective: Callable[[np.ndarray], np.ndarray], result: PsoResult, previous: np.ndarray,
+                   iterations: int, rng: np.random.Generator, movable: np.ndarray | None = None,
+                   turn_deg: float = 90.0) -> PsoResult:
+    """The search's ``result`` with the best particle of each facing polished: the best of those
+    whose root turned at most ``turn_deg`` from ``previous`` (36,), the track's facing, and the best
+    of the rest, if any (a re-check's or the start's other facing); ``best`` and ``value`` chosen
+    again among the polished. Polishing only the winner left an unpolished other facing to compete
+    with a track polished frame after frame: a track started in the mirrored facing of a person seen
+    from behind then sat too deep for the re-checks to replace it. No ``iterations``: ``result``."""
+    if iterations <= 0:
+        return result
+    poses, values = result.personal_bests.copy(), result.personal_values.copy()
+    turned = np.asarray(root_turn_deg(previous, poses)) > turn_deg
+    for side in (~turned, turned):
+        rows = np.flatnonzero(side & np.isfinite(values))
+        if rows.size:
+            k = rows[np.argmin(values[rows])]
+            poses[k], values[k] = polish_pose(objective, poses[k], iterations, rng, movable)
+    g = int(np.argmin(values))
+    return replace(result, best=poses[g].copy(), value=float(values[g]), personal_bests=poses, personal_values=values)
+
+
+def polish_solution(objective: Callable[[np.ndarray], np.ndarray], result: PsoResult, previous: np.ndarray | None,
+                    iterations: int, rng: np.random.Generator, duel: bool,
+                    hold: Callable[[PsoResult], np.ndarray], turn_deg: float = 90.0) -> np.ndarray:
+    """A frame's solution (36,) from its search's ``result``, polished (the tracker's ``polish``).
+
+    previous: the track's last pose (None on a track's first frame: the best, polished); hold:
+    the tracker's choice between the track's facing and a turned challenger
+    (:meth:`~swarmpose.tracking.body_tracker.BodyTracker._hold_facing`). duel: each facing's best
+    polished before ``hold`` chooses (:func:`polish_facings`: a young track, whose start's facings
+    are re-checked on equal terms); else ``hold`` chooses first and its pick is polished: a
+    settled track's polished pose meets a turned challenger with the advantage of its frames (the
+    duel on every frame let a re-check's mirrored facing, polished, win twice and flip a settled
+    track: BENCHMARKS.md, several people, fifth part)."""
+    if duel and previous is not None:
+        return hold(polish_facings(objective, result, previous, iterations, rng, WITHOUT_ARMS, turn_deg))
+    best = result.best if previous is None else hold(result)
+    return polish_pose(objective, best, iterations, rng, WITHOUT_ARMS)[0]

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from swarmpose.body.kinematics import quaternion_multiply, root_turn_deg
 from swarmpose.body.skeleton import ANGLE_NAMES
-from swarmpose.tracking.pose_polish import WITHOUT_ARMS, polish_pose
+from swarmpose.tracking.pose_polish import WITHOUT_ARMS, polish_facings, polish_pose, polish_solution
+from swarmpose.tracking.pso import PsoResult
 from swarmpose.tracking.search import pose_bounds
 
 
@@ -86,3 +88,72 @@ def test_a_minimum_beyond_the_angle_limits_is_met_at_the_limits_and_non_finite_v
     assert np.isfinite(value) and np.isclose(value, bowl_of(best[None])[0])
     assert np.all(best[7:] <= hi[7:]) and np.all(best[7:] >= lo[7:])
     assert np.mean(hi[7:] - best[7:]) < 0.25 * np.mean(hi[7:] - start[7:])  # pressed towards the limits
+
+
+def _two_facings(rng: np.random.Generator):
+    """A track's pose, an objective with a basin of its facing (floor 1.0) and a deeper one of the
+    pose turned by 180 degrees about the vertical (floor 0.5), and a search result whose best
+    particle lies near the shallow basin's floor (1.01) while the turned one starts higher (1.5)."""
+    track = a_pose(rng)
+    turned = track.copy()
+    turned[3:7] = quaternion_multiply(track[3:7], np.array([0.0, 0.0, 1.0, 0.0]))  # 180 deg about body y
+    own_target, turned_target = track[7:].copy(), np.clip(track[7:] + 0.1, *[b[7:] for b in pose_bounds()])
+
+    def objective(poses: np.ndarray) -> np.ndarray:
+        is_turned = root_turn_deg(track, poses) > 90.0
+        target = np.where(is_turned[:, None], turned_target, own_target)
+        return np.where(is_turned, 0.5, 1.0) + ((poses[:, 7:] - target) ** 2).sum(axis=1)
+
+    own = track.copy()
+    own[7:] += 0.1 / np.sqrt(29)  # 1.01
+    other = turned.copy()
+    other[7:] = turned_target + 1.0 / np.sqrt(29) * np.sign(rng.normal(size=29))  # 1.5
+    other[7:] = np.clip(other[7:], *[b[7:] for b in pose_bounds()])
+    poses = np.stack([own, other, own + 0.001])
+    values = objective(poses)
+    result = PsoResult(own.copy(), float(values[0]), values[:1], 3, poses, values)
+    return track, objective, result
+
+
+def test_each_facing_is_polished_before_they_compete():
+    """The turned particle, worse as the search left it (1.5 against 1.01), wins once both are
+    polished (its basin is 0.5 deep): the two facings compete at their own minima."""
+    track, objective, result = _two_facings(np.random.default_rng(2))
+    assert result.personal_values[1] > result.value
+    out = polish_facings(objective, result, track, 60, np.random.default_rng(0))
+    assert root_turn_deg(track, out.best) > 90.0, "the deeper, turned basin should win after the polish"
+    assert out.value < 1.0 and np.isclose(out.value, objective(out.best[None])[0])
+    assert np.all(out.personal_values <= result.personal_values)  # never worse, for either facing
+    assert polish_facings(objective, result, track, 0, np.random.default_rng(0)) is result  # 0 rounds: as it is
+
+
+def test_with_one_facing_in_the_swarm_only_the_best_is_polished_as_before():
+    """No turned particle: exactly the polish of the search's best (same draws, same pose)."""
+    track, objective, result = _two_facings(np.random.default_rng(3))
+    same = PsoResult(result.best, result.value, result.history, 3, result.personal_bests[[0, 2]],
+                     result.personal_values[[0, 2]])
+    out = polish_facings(objective, same, track, 40, np.random.default_rng(7), WITHOUT_ARMS)
+    want, value = polish_pose(objective, result.best, 40, np.random.default_rng(7), WITHOUT_ARMS)
+    np.testing.assert_array_equal(out.best, want)
+    assert out.value == value
+
+
+def test_a_young_track_duels_a_settled_one_keeps_its_choice():
+    """polish_solution: with the duel (a young track) the turned facing, polished, wins; without it
+    the tracker's choice (here: the search's best, the track's facing) is polished alone and kept;
+    on a track's first frame (no previous pose) the search's best is polished."""
+    track, objective, result = _two_facings(np.random.default_rng(2))
+    chosen = []
+
+    def hold(res: PsoResult) -> np.ndarray:
+        chosen.append(res.best.copy())
+        return res.best
+
+    young = polish_solution(objective, result, track, 60, np.random.default_rng(0), True, hold)
+    assert root_turn_deg(track, young) > 90.0
+    settled = polish_solution(objective, result, track, 60, np.random.default_rng(0), False, hold)
+    assert root_turn_deg(track, settled) < 90.0 and np.array_equal(chosen[-1], result.best)
+    assert objective(settled[None])[0] <= result.value
+    first = polish_solution(objective, result, None, 60, np.random.default_rng(0), True, hold)
+    np.testing.assert_array_equal(first, polish_pose(objective, result.best, 60, np.random.default_rng(0),
+                                                     WITHOUT_ARMS)[0])
