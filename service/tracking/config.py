@@ -69,9 +69,10 @@ class TrackerConfig:
     hidden_lifts: bool = setting(True, "a limb joint the last solution hides behind its own body, where the depth "
                                        "shows that occluder, leaves the 3D joint term (its lift measured the "
                                        "occluder); the 2D term keeps it")
-    polish: int = setting(0, "after each frame's search, this many rounds of a local search (32 poses each) take "
-                             "the best pose's root, spine, neck and legs further down the same objective; the arms "
-                             "stay the search's (0 = off; 60 measured, BENCHMARKS.md)", minimum=0)
+    polish: int = setting(60, "after each frame's search, this many rounds of a local search (32 poses each) take "
+                              "the best pose's root, spine, neck and legs further down the same objective (on a young "
+                              "track the best of each facing in the swarm, before they compete); the arms stay the "
+                              "search's (0 = off: about a sixth more tracked frames/s; BENCHMARKS.md)", minimum=0)
     backward: int = setting(0, "offline runs (track, eval, the Python API's track): every this many frames, each "
                                "person's track is run backwards over them from its last solution, and those "
                                "frames get the backward fit, published this many frames late (a track's start "

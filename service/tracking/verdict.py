@@ -2,7 +2,12 @@
 
 * **Lost** when the 2D joints are off by more than ``lost_joint_error`` of the person's size
   (weighted mean), or fewer than ``lost_depth_agreement`` of the model's rendered pixels
-  agree with the depth within T, or there are neither joints nor depth to fit.
+  agree with the depth within T, or there are neither joints nor depth to fit. Where other
+  people's pixels were removed from the depth (several people), the 2D test is not applied while
+  at least :data:`HIDDEN_TRUST_AGREEMENT` of the model's observed pixels agree: the detection on
+  a crop that others overlap is what is off then (the 3-person crossing's waver, 71 % visible
+  behind a walker, 91 % of his model's pixels agreeing, was judged lost on his 2D joints and not
+  found again for 18 frames: BENCHMARKS.md, several people, fifth part).
 * **Confidence** per evaluation joint, 0..1: the mean of a 2D agreement
   ``s·exp(−½(d/σ)²)`` (s = detection score, d = model–detection distance px, σ = 4 % of the
   person's size; only where the layout detects the joint) and a depth agreement
@@ -18,6 +23,10 @@ from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.detect.joints import Joints2D
 from swarmpose.tracking.objective import JointTargets, Objective
 
+HIDDEN_TRUST_AGREEMENT = 0.8
+"""With other people's pixels removed, a fit whose observed pixels agree with the depth at least
+this much is not judged lost on its 2D joints alone."""
+
 
 def judge(objective: Objective, counts: dict[str, np.ndarray] | None, targets: JointTargets,
           parts: dict[str, float], state: str, lost_joint_error: float, lost_depth_agreement: float,
@@ -28,16 +37,19 @@ def judge(objective: Objective, counts: dict[str, np.ndarray] | None, targets: J
     (None: no observed depth in the box); parts: its objective terms (E_J2D px);
     observed_only: the depth agreement counts only the model's pixels that have an
     observation (``both``), for a depth with other people's pixels removed: the model's
-    parts behind them are hidden, not wrong."""
-    if objective.uses_joints:
-        size = targets.extent_px
-        if size > 0 and parts["E_J2D"] > lost_joint_error * size:
-            return "lost", f"2D joints off by {parts['E_J2D']:.0f} px (person {size:.0f} px)"
+    parts behind them are hidden, not wrong; and the 2D test waits on a poor agreement
+    (:data:`HIDDEN_TRUST_AGREEMENT`)."""
+    agree = None
     if counts is not None and objective.weights.depth > 0:
         rendered = int(counts["both" if observed_only else "rendered"][0])
         agree = int(counts["close"][0]) / rendered if rendered else 0.0
-        if agree < lost_depth_agreement:
-            return "lost", f"only {100 * agree:.0f} % of the model's pixels agree with the depth"
+    if objective.uses_joints:
+        size = targets.extent_px
+        hidden_by_others = observed_only and agree is not None and agree >= HIDDEN_TRUST_AGREEMENT
+        if size > 0 and parts["E_J2D"] > lost_joint_error * size and not hidden_by_others:
+            return "lost", f"2D joints off by {parts['E_J2D']:.0f} px (person {size:.0f} px)"
+    if agree is not None and agree < lost_depth_agreement:
+        return "lost", f"only {100 * agree:.0f} % of the model's pixels agree with the depth"
     if not objective.uses_joints and not objective.has_depth:
         return "lost", "no joints and no depth to fit"
     return state, "" if objective.uses_joints else "no joints detected: depth only"

@@ -16,13 +16,14 @@ def test_a_record_is_read_back_only_with_its_own_settings(tmp_path):
 
 
 def test_a_record_made_before_a_setting_existed_reads_as_what_the_tracker_did_then(tmp_path):
-    """Records written before arm_prior, limb_flips, hidden_lifts, arm_proposals and hypotheses
-    existed lack them: they were made with the prior off (0, still its default), without flips,
-    with every lift in the 3D term, without arm proposals and without sub-swarms (on by default
-    now), so they resume a run with those off, and neither the default run nor one with the prior on."""
+    """Records written before arm_prior, limb_flips, hidden_lifts, arm_proposals, hypotheses and
+    polish existed lack them: they were made with the prior off (0, still its default), without
+    flips, with every lift in the 3D term, without arm proposals, sub-swarms or polish (on by
+    default now), so they resume a run with those off, and neither the default run nor one with
+    the prior on."""
     path = tmp_path / "old.json"
     write_record(path, {"mpjpe_mm": 50.0, "particles": 64, "generations": 64, "max_people": 1})
-    then = {"limb_flips": False, "hidden_lifts": False, "arm_proposals": False, "hypotheses": 0}
+    then = {"limb_flips": False, "hidden_lifts": False, "arm_proposals": False, "hypotheses": 0, "polish": 0}
     assert read_record(path, tracker_settings(then))["mpjpe_mm"] == 50.0
     assert read_record(path, tracker_settings(None)) is None, "the default run has flips"
     assert read_record(path, tracker_settings({"limb_flips": False})) is None, "and drops hidden lifts"
@@ -50,7 +51,8 @@ def test_utdmhad_records_carry_the_automatic_height_only_where_it_acts(tmp_path)
     assert read_record(old, variant_settings(on, "hybrid", "default")) is None
     assert read_record(old, variant_settings(on, "hybrid", "measured"))["mpjpe_mm"] == 70.0
     old_lift = tmp_path / "old_lift.json"
-    write_record(old_lift, {"mpjpe_mm": 55.0, **tracker_settings({"arm_proposals": False, "hypotheses": 0})})
+    write_record(old_lift, {"mpjpe_mm": 55.0, **tracker_settings({"arm_proposals": False, "hypotheses": 0,
+                                                                   "polish": 0})})
     assert read_record(old_lift, variant_settings(on, "lift", "default"))["mpjpe_mm"] == 55.0
     assert variant_settings(tracker_settings(None), "hybrid", "default")["auto_height"] is True  # the default
     new = tmp_path / "new.json"
@@ -76,7 +78,7 @@ def test_records_of_the_modes_the_arm_proposals_do_not_act_in_resume_without_the
     from swarmpose.bench.store import mode_settings
 
     old = tmp_path / "old.json"
-    then = tracker_settings({"arm_proposals": False, "hypotheses": 0})  # before both settings
+    then = tracker_settings({"arm_proposals": False, "hypotheses": 0, "polish": 0})  # before the three settings
     write_record(old, {"mpjpe_mm": 90.0, **then})
     for mode in ("joints", "lift"):
         assert read_record(old, mode_settings(tracker_settings({"hypotheses": 0}), mode))["mpjpe_mm"] == 90.0
@@ -113,3 +115,19 @@ def test_records_without_the_backward_pass_resume_runs_without_it_and_lift_never
     assert read_record(old, tracker_settings({"backward": 40})) is None
     assert mode_settings(tracker_settings({"backward": 40}), "lift")["backward"] == 0
     assert mode_settings(tracker_settings({"backward": 40}), "hybrid")["backward"] == 40
+
+
+def test_the_polish_acts_in_the_hybrid_records_only_and_older_records_read_as_without_it(tmp_path):
+    """``polish`` (60 by default) is stored with every record; the baseline modes (joints, depth,
+    lift) are made and resumed with 0 whatever was asked, so their records made before the setting
+    existed resume a default run; a hybrid record made before it resumes only ``--polish 0``."""
+    from swarmpose.bench.store import mode_settings
+
+    assert tracker_settings(None)["polish"] == 60
+    for mode in ("hybrid", "joints", "depth", "lift"):
+        settings = mode_settings(tracker_settings(None), mode)
+        assert settings["polish"] == (60 if mode == "hybrid" else 0), mode
+        old = tmp_path / f"old-{mode}.json"
+        write_record(old, {"mpjpe_mm": 45.0, **{k: v for k, v in settings.items() if k != "polish"}})
+        assert (read_record(old, settings) is None) == (mode == "hybrid"), mode
+        assert read_record(old, mode_settings(tracker_settings({"polish": 0}), mode))["mpjpe_mm"] == 45.0

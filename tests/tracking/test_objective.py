@@ -359,3 +359,33 @@ def test_the_depth_agreement_skips_pixels_other_people_hide_only_when_asked(body
     assert state == "lost" and f"{100 * close / rendered:.0f} %" in reason
     state, _ = judge(objective, counts, JointTargets.empty(), {}, "tracking", 0.12, 0.75, observed_only=True)
     assert state == "tracking"
+
+
+def test_a_fit_hidden_by_others_is_not_lost_on_its_2d_joints_while_its_depth_agrees(body, scene):
+    """The true pose, its depth partly removed (others in front) and its 2D joints far off (the
+    detector on an overlapped crop): alone in view it is lost on the 2D joints; with others' pixels
+    removed (observed_only) it is kept while its observed pixels agree, and lost on the joints
+    again when they do not."""
+    from swarmpose.tracking.verdict import HIDDEN_TRUST_AGREEMENT, judge
+
+    h, depth = scene
+    box = box_around(INTR.project(body.pose(h[None])[0]), margin=0.15)
+    hidden = depth.copy()
+    hidden[int(INTR.project(body.posed_points(h[None], ("left_hip",))[0])[0, 1]):] = 0.0
+    objective = Objective(body, INTR, ParticleScorer(body, INTR, (64, 64)), ObjectiveWeights(depth=1.0, joints=1.0))
+    names = ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")
+    xy = INTR.project(body.posed_points(h[None], names)[0])
+    targets = JointTargets(names, body.point_indices(names), xy, np.full((len(names), 3), np.nan),
+                           np.ones(len(names)))
+    objective.set_frame(hidden, box, targets, h)
+    _, _, counts = objective.scorer.render_and_score(h[None])
+    agree = int(counts["close"][0]) / int(counts["both"][0])
+    assert agree >= HIDDEN_TRUST_AGREEMENT
+    off = {"E_J2D": 0.2 * targets.extent_px}  # the 2D joints off by a fifth of the person
+    state, reason = judge(objective, counts, targets, off, "tracking", 0.12, 0.4)
+    assert state == "lost" and reason.startswith("2D joints off")
+    assert judge(objective, counts, targets, off, "tracking", 0.12, 0.4, observed_only=True)[0] == "tracking"
+    poor = {k: v.copy() for k, v in counts.items()}
+    poor["close"][0] = int(0.7 * int(counts["both"][0]))  # 70 % agree: above the depth test's 40 %
+    state, reason = judge(objective, poor, targets, off, "tracking", 0.12, 0.4, observed_only=True)
+    assert state == "lost" and reason.startswith("2D joints off")
