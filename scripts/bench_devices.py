@@ -184,6 +184,8 @@ def main(argv: list[str] | None = None) -> int:
     meas.add_argument("--warmup", type=int, default=3)
     meas.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
+    if args.step == "measure" and (args.repeats < 1 or args.warmup < 0):
+        parser.error("--repeats must be at least 1 and --warmup at least 0")
     try:
         if args.step == "prepare":
             print(json.dumps(prepare(args.scene, args.body, args.lod)))

@@ -146,7 +146,8 @@ def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
                    help="the offline backward pass: every N frames each track run backwards over them from its "
                         "last solution (0: off, the tracker's default; N >= --frames: the whole sequence)")
     p.add_argument("--polish", type=non_negative_int, default=60, metavar="N",
-                   help="N rounds of the local polish after each frame's search (60: the tracker's default; 0: off)")
+                   help="N rounds of the local polish after each frame's search, hybrid mode only (60: the tracker's "
+                        "default; 0: off)")
 
 
 def _tracker_switches(args: argparse.Namespace) -> dict:

@@ -21,7 +21,7 @@ Per frame (:meth:`BodyTracker.step`):
    PSO over wide angle ranges each; the best fit by the objective is the centre of the normal
    search, the others join it as particles. No manual initialisation.
 3. **Search**. PSO (canonical or perturbed) of ``E = w_D·E_D + w_J·E_J``; with ``polish``, a local
-   search then takes each facing's best pose further down E before they compete (:mod:`.pose_polish`).
+   search takes the chosen pose (young track: each facing's best) further down E, arms as searched (.pose_polish).
 4. **Verdict** (:mod:`swarmpose.tracking.verdict`): lost or not, and per-joint confidence.
    Frames with no usable joints and no previous solution, or with neither joints nor
    depth, are *lost* with the reason; the next frame then starts from J^e again.

@@ -95,7 +95,8 @@ class TrackerConfig:
     threshold_m: float = setting(0.30, "T: depth differences are clipped at this many metres", minimum=0.01)
     min_score: float = setting(0.3, "detected keypoints below this score are ignored", minimum=0.0, maximum=1.0)
     lost_joint_error: float = setting(0.12, "lost when the 2D joints are off by more than this share of the "
-                                            "person's size", minimum=0.0)
+                                            "person's size (not while others hide part of the person and the "
+                                            "depth agrees: README, several people)", minimum=0.0)
     lost_depth_agreement: float = setting(0.4, "lost when fewer than this share of the model's pixels agree with "
                                                "the depth", minimum=0.0, maximum=1.0)
 

@@ -4,7 +4,8 @@
   (weighted mean), or fewer than ``lost_depth_agreement`` of the model's rendered pixels
   agree with the depth within T, or there are neither joints nor depth to fit. Where other
   people's pixels were removed from the depth (several people), the 2D test is not applied while
-  at least :data:`HIDDEN_TRUST_AGREEMENT` of the model's observed pixels agree: the detection on
+  at least :data:`HIDDEN_TRUST_SEEN` of the model's pixels are observed and
+  :data:`HIDDEN_TRUST_AGREEMENT` of those agree: the detection on
   a crop that others overlap is what is off then (the 3-person crossing's waver, 71 % visible
   behind a walker, 91 % of his model's pixels agreeing, was judged lost on his 2D joints and not
   found again for 18 frames: BENCHMARKS.md, several people, fifth part).
@@ -25,7 +26,10 @@ from swarmpose.tracking.objective import JointTargets, Objective
 
 HIDDEN_TRUST_AGREEMENT = 0.8
 """With other people's pixels removed, a fit whose observed pixels agree with the depth at least
-this much is not judged lost on its 2D joints alone."""
+this much is not judged lost on its 2D joints alone ..."""
+HIDDEN_TRUST_SEEN = 0.5
+"""... provided at least this share of its rendered pixels has an observation (a fit nearly all
+behind others is judged on its joints as before)."""
 
 
 def judge(objective: Objective, counts: dict[str, np.ndarray] | None, targets: JointTargets,
@@ -39,13 +43,15 @@ def judge(objective: Objective, counts: dict[str, np.ndarray] | None, targets: J
     observation (``both``), for a depth with other people's pixels removed: the model's
     parts behind them are hidden, not wrong; and the 2D test waits on a poor agreement
     (:data:`HIDDEN_TRUST_AGREEMENT`)."""
-    agree = None
+    agree, seen = None, 0.0
     if counts is not None and objective.weights.depth > 0:
         rendered = int(counts["both" if observed_only else "rendered"][0])
         agree = int(counts["close"][0]) / rendered if rendered else 0.0
+        seen = int(counts["both"][0]) / max(int(counts["rendered"][0]), 1)
     if objective.uses_joints:
         size = targets.extent_px
-        hidden_by_others = observed_only and agree is not None and agree >= HIDDEN_TRUST_AGREEMENT
+        hidden_by_others = (observed_only and agree is not None and agree >= HIDDEN_TRUST_AGREEMENT
+                            and seen >= HIDDEN_TRUST_SEEN)
         if size > 0 and parts["E_J2D"] > lost_joint_error * size and not hidden_by_others:
             return "lost", f"2D joints off by {parts['E_J2D']:.0f} px (person {size:.0f} px)"
     if agree is not None and agree < lost_depth_agreement:

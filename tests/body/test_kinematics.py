@@ -246,3 +246,17 @@ def test_batched_fk_matches_a_bone_by_bone_recursion(body):
         want_rot, want_pos = _loop_fk(model.rig, h)
         np.testing.assert_allclose(rot, want_rot, atol=1e-9)
         np.testing.assert_allclose(pos, want_pos, atol=1e-9)
+
+
+def test_all_joints_at_once_equal_each_joint_composed_alone_bit_for_bit():
+    """joint_rotations (every DOF in one call, the products padded with the identity) gives exactly
+    compose_joint's matrices, joint by joint, on random angles: the same products in the same order."""
+    from swarmpose.body.kinematics import compose_joint
+    from swarmpose.body.skeleton import TRACKING_JOINTS
+
+    angles = np.random.default_rng(4).uniform(-2.0, 2.0, (11, N_ANGLES))
+    together = joint_rotations(angles)
+    for ji, joint in enumerate(TRACKING_JOINTS):
+        first = angle_offset(joint.name)
+        alone = compose_joint(joint, angles[:, first:first + len(joint.dofs)])
+        assert np.array_equal(together[:, ji], alone), joint.name

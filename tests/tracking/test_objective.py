@@ -365,8 +365,8 @@ def test_a_fit_hidden_by_others_is_not_lost_on_its_2d_joints_while_its_depth_agr
     """The true pose, its depth partly removed (others in front) and its 2D joints far off (the
     detector on an overlapped crop): alone in view it is lost on the 2D joints; with others' pixels
     removed (observed_only) it is kept while its observed pixels agree, and lost on the joints
-    again when they do not."""
-    from swarmpose.tracking.verdict import HIDDEN_TRUST_AGREEMENT, judge
+    again when they do not, or when less than half of the model is seen."""
+    from swarmpose.tracking.verdict import HIDDEN_TRUST_AGREEMENT, HIDDEN_TRUST_SEEN, judge
 
     h, depth = scene
     box = box_around(INTR.project(body.pose(h[None])[0]), margin=0.15)
@@ -388,4 +388,8 @@ def test_a_fit_hidden_by_others_is_not_lost_on_its_2d_joints_while_its_depth_agr
     poor = {k: v.copy() for k, v in counts.items()}
     poor["close"][0] = int(0.7 * int(counts["both"][0]))  # 70 % agree: above the depth test's 40 %
     state, reason = judge(objective, poor, targets, off, "tracking", 0.12, 0.4, observed_only=True)
+    assert state == "lost" and reason.startswith("2D joints off")
+    mostly_hidden = {k: v.copy() for k, v in counts.items()}
+    mostly_hidden["rendered"][0] = int(counts["both"][0] / (0.9 * HIDDEN_TRUST_SEEN))  # under half of it seen
+    state, reason = judge(objective, mostly_hidden, targets, off, "tracking", 0.12, 0.4, observed_only=True)
     assert state == "lost" and reason.startswith("2D joints off")
