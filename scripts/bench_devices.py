@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from swarmpose.core.errors import SwarmposeError
+from swarmpose.core.settings import parse_size
 
 SCENE_VERSION = 1
 
@@ -164,7 +165,7 @@ def _ints(text: str) -> list[int]:
 
 
 def _tiles(text: str) -> list[tuple[int, int]]:
-    return [tuple(int(v) for v in t.lower().split("x")) for t in text.split(",") if t]  # type: ignore[misc]
+    return [parse_size(t, "--tiles") for t in text.split(",") if t]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -241,20 +241,21 @@ def _bone_levels(parents: bytes) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
 
 
 @functools.lru_cache(maxsize=16)
-def _bone_shares(joints: bytes, fractions: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Which bones (after the root) take a whole joint rotation and which a power of one.
+def _bone_shares(joints: bytes, fractions: bytes) -> tuple[np.ndarray, ...]:
+    """Which bones (after the root) take a whole joint rotation and which a power of one, from
+    the (B,) int64 ``bone_joint`` and float64 ``bone_fraction`` arrays' bytes.
 
-    Returns ``whole`` (bones), ``whole_joint`` (their joints), ``part`` (bones), and the
-    distinct (joint, fraction) pairs of ``part`` as ``pair_joint``, ``pair_fraction``
-    indexed by ``part``'s order through :func:`np.unique`'s inverse (in the last array)."""
+    Returns ``whole`` (bones) and ``whole_joint`` (their joints); ``part`` (bones); the distinct
+    (joint, fraction) pairs among ``part`` as ``pair_joint`` (int) and ``pair_fraction``; and
+    ``pair_of_part``: for each bone of ``part`` the index of its pair (each power is taken once)."""
     joint = np.frombuffer(joints, dtype=np.int64)
     fraction = np.frombuffer(fractions, dtype=np.float64)
     moved = (joint >= 0) & (np.arange(len(joint)) > 0)
     whole = np.flatnonzero(moved & (fraction == 1.0))
     part = np.flatnonzero(moved & (fraction != 1.0))
-    pairs, inverse = np.unique(np.stack([joint[part], fraction[part]], -1).reshape(-1, 2), axis=0,
-                               return_inverse=True)
-    return whole, joint[whole], part, pairs, inverse.reshape(-1)
+    pairs, pair_of_part = np.unique(np.stack([joint[part], fraction[part]], -1).reshape(-1, 2), axis=0,
+                                    return_inverse=True)
+    return whole, joint[whole], part, pairs[:, 0].astype(np.int64), pairs[:, 1], pair_of_part.reshape(-1)
 
 
 def canonical_rotations(parents: np.ndarray, bone_joint: np.ndarray, bone_fraction: np.ndarray,
@@ -266,15 +267,15 @@ def canonical_rotations(parents: np.ndarray, bone_joint: np.ndarray, bone_fracti
     The bones of one depth in the tree are multiplied together.
     """
     p, b = angles.shape[0], len(parents)
-    whole, whole_joint, part, pairs, inverse = _bone_shares(np.asarray(bone_joint, dtype=np.int64).tobytes(),
-                                                            np.asarray(bone_fraction, dtype=np.float64).tobytes())
+    whole, whole_joint, part, pair_joint, pair_fraction, pair_of_part = _bone_shares(
+        np.asarray(bone_joint, dtype=np.int64).tobytes(), np.asarray(bone_fraction, dtype=np.float64).tobytes())
     full = joint_rotations(angles)  # every joint once; bones sharing a joint take a power of it
     local = np.empty((p, b, 3, 3))
     local[:] = np.eye(3)  # rigid bones: the parent's frame
     local[:, whole] = full[:, whole_joint]
     if len(part):  # each (joint, fraction) once: bones sharing it take the same power
-        powers = rotation_power(full[:, pairs[:, 0].astype(np.int64)], pairs[:, 1])
-        local[:, part] = powers[:, inverse]
+        powers = rotation_power(full[:, pair_joint], pair_fraction)
+        local[:, part] = powers[:, pair_of_part]
     rot = np.empty((p, b, 3, 3))
     rot[:, 0] = root
     for bones, above in _bone_levels(np.asarray(parents, dtype=np.int64).tobytes()):
