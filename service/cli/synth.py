@@ -25,7 +25,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
     """Render a synthetic RGBD sequence with ground truth."""
     config = SynthConfig(frames=args.frames, fps=args.fps, seed=args.seed, camera_distance=args.camera_distance,
                          camera_yaw_deg=args.camera_yaw, camera_height=args.camera_height,
-                         layout=args.layout, skinning=args.skinning)
+                         layout=args.layout, skinning=args.skinning,
+                         clothes=args.clothes)
     config.validate()
     specs = scene_specs(args)
     if specs is not None:
@@ -113,6 +114,10 @@ def add_synth_command(sub: argparse._SubParsersAction, common: argparse.Argument
     p.add_argument("--camera-yaw", type=float, default=0.0, help="degrees around the subject, 0 = in front")
     p.add_argument("--camera-height", type=float, default=1.2, help="lens height above the floor, metres")
     p.add_argument("--skinning", choices=("dqs", "lbs"), default="dqs", help="skinning of the rendered body")
+    p.add_argument("--clothes", action=argparse.BooleanOptionalAction, default=False,
+                   help="colour each body by garment (skin at the head, forearms and hands; shirt; trousers; "
+                        "shoes) instead of one colour per person; for RGB networks of your own (MoveNet on the "
+                        "3-person crossing was no better for it: BENCHMARKS.md)")
     p.add_argument("--layout", default="coco17", help="keypoint layout of the simulated detector")
     p.set_defaults(func=cmd_synth)
 

@@ -98,7 +98,8 @@ class Renderer:
         """Several posed meshes (and the room) in one ray cast, so they occlude each other.
 
         meshes: per person (vertices (V, 3) m, triangles (F, 3)); albedos: per person an RGB
-        albedo (3,) in 0..1 (default :func:`person_albedo`). Returns depth (H, W) float32 m
+        albedo in 0..1, (3,) for the whole body or (F, 3) per triangle (clothes,
+        :mod:`swarmpose.sim.clothing`); default :func:`person_albedo`. Returns depth (H, W) float32 m
         (0 = nothing hit), colour (H, W, 3) uint8 RGB and labels (H, W) int32: k where person
         k (1-based, in ``meshes`` order) is the first surface hit, 0 for the room or nothing.
         """
@@ -121,10 +122,12 @@ class Renderer:
 
         shade = AMBIENT + (1 - AMBIENT) * np.abs(np.sum(normals * self._view, axis=-1))
         albedo = np.zeros(depth.shape + (3,))
+        triangle = hit["primitive_ids"].numpy()
         for k, geometry in enumerate(person_ids):
             body = valid & (geom == geometry)
             labels[body] = k + 1
-            albedo[body] = person_albedo(k) if albedos is None else albedos[k]
+            colour = person_albedo(k) if albedos is None else np.asarray(albedos[k], float)
+            albedo[body] = colour[triangle[body]] if colour.ndim == 2 else colour
         if room is not None:
             floor = valid & (geom == ids[0])
             wall = valid & (geom == ids[1])

@@ -2,7 +2,9 @@
 
 Output folder (Open3D's RGBD layout plus ground truth)::
 
-    color/000000.png ...     RGB render of the people in a room (floor + back wall)
+    color/000000.png ...     RGB render of the people in a room (floor + back wall), each
+                             in one colour, or with ``clothes`` dressed
+                             (:mod:`swarmpose.sim.clothing`: skin, shirt, trousers, shoes)
     depth/000000.png ...     uint16 millimetres, 0 = no measurement, Kinect-like noise
     intrinsic.json           Open3D PinholeCameraIntrinsic JSON
     groundtruth.jsonl        one line per frame: frame, timestamp_ns, pose (36-D, camera
@@ -15,7 +17,7 @@ Output folder (Open3D's RGBD layout plus ground truth)::
 One person (:func:`synthesize`, or :func:`synthesize_people` with one person) writes no
 ``people`` in ``groundtruth.jsonl``: the file is the single-person format, byte for byte.
 Several people (:func:`synthesize_people`, ids 1..P in the order given) are rendered in
-one ray cast so they occlude each other, each in its own clothing colour; each line keeps
+one ray cast so they occlude each other, each in its own shirt colour; each line keeps
 person 1's top-level fields (old readers see person 1) and adds ``people``: per person
 ``id``, ``pose``, ``joints3d``, ``joints2d``, ``detections`` (keypoints hidden by another
 person are missing), ``visible`` (share of the person's silhouette not hidden by others,
@@ -46,6 +48,7 @@ from swarmpose.core.errors import ConfigError, OutputError
 from swarmpose.core.progress import progress_bar
 from swarmpose.detect.simulated import SimulatedNoise, person_size, simulate_detections
 from swarmpose.motion.sequence import Motion
+from swarmpose.sim.clothing import clothing_albedo, shirt_albedo
 from swarmpose.sim.depth_noise import KinectNoise
 from swarmpose.sim.render import Renderer, Room
 from swarmpose.sim.scene import PersonSpec, SceneFilming, ScenePerson, check_scene, place_in_world, place_people
@@ -70,6 +73,7 @@ class SynthConfig:
     detector: SimulatedNoise = field(default_factory=SimulatedNoise)
     layout: str = "coco17"
     skinning: str = "dqs"
+    clothes: bool = False
 
     def validate(self) -> None:
         """Raise ConfigError for values no camera or sequence can have."""
@@ -200,6 +204,7 @@ def _render(out: Path, people: list[ScenePerson], config: SynthConfig, descripti
     meta = {
         "schema": "swarmpose.sequence", "version": 1, "frames": config.frames, "fps": config.fps,
         "seed": config.seed, "body": first.body.name, "motion": first.motion.name, "skinning": config.skinning,
+        "clothes": config.clothes,
         "camera": {"distance_m": config.camera_distance, "yaw_deg": config.camera_yaw_deg,
                    "height_m": config.camera_height, "world_to_camera_rotation": film.rotation.tolist(),
                    "eye_world_m": film.eye.tolist()},
@@ -211,6 +216,8 @@ def _render(out: Path, people: list[ScenePerson], config: SynthConfig, descripti
                            "height_m": round(p.body.height, 4)} for k, p in enumerate(people, 1)]
     (out / "sequence.json").write_text(json.dumps(meta, indent=2))
 
+    albedos = ([clothing_albedo(p.body, shirt_albedo(k), k) for k, p in enumerate(people)] if config.clothes
+               else None)  # None: each person in one colour
     several = len(people) > 1
     depth_range = [np.inf, -np.inf]
     visible_sum = np.zeros(len(people))
@@ -219,7 +226,7 @@ def _render(out: Path, people: list[ScenePerson], config: SynthConfig, descripti
         for i in range(config.frames):
             transforms = [p.body.transforms(film.poses[k][i:i + 1]) for k, p in enumerate(people)]
             meshes = [(p.body.skin(t, config.skinning)[0], p.body.triangles) for p, t in zip(people, transforms)]
-            depth, colour, labels = renderer.render_people(meshes, film.room)
+            depth, colour, labels = renderer.render_people(meshes, film.room, albedos)
             noisy = config.noise.apply(depth, np.random.default_rng([config.seed, i, 1]))
             seen = noisy[(labels > 0) & (noisy > 0)]
             if seen.size:
