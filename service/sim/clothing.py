@@ -5,7 +5,7 @@ people's sleeves, skin and trousers draw the limb's outline. Dressed, the 3-pers
 not come out better for MoveNet (BENCHMARKS.md, several people, sixth part), so the plain render
 stays the default and every benchmark's; the option is for other RGB networks. Each triangle
 of a body takes the colour of the garment over the part that moves it (the bone with the largest
-skinning weight at its first vertex, up the bone tree to the first bone a tracking joint drives):
+skinning weight at most of its vertices, up the bone tree to the first bone a tracking joint drives):
 
 * skin: the neck's bones (neck, head) and the elbows' (forearms, hands): a short-sleeved shirt;
 * shirt (the person's palette colour, :data:`~swarmpose.sim.render.PERSON_ALBEDOS`): the spine,
@@ -22,7 +22,7 @@ import numpy as np
 
 from swarmpose.body.skeleton import JOINT_NAMES
 from swarmpose.body.skinned import SkinnedBody
-from swarmpose.sim.render import person_albedo
+from swarmpose.sim.render import PERSON_ALBEDOS, person_albedo
 
 SKIN_ALBEDOS = (np.array([0.87, 0.68, 0.55]), np.array([0.55, 0.38, 0.27]), np.array([0.95, 0.80, 0.70]),
                 np.array([0.70, 0.50, 0.36]))
@@ -41,9 +41,9 @@ GARMENT_OF_JOINT = {"neck": "skin", "left_elbow": "skin", "right_elbow": "skin",
 
 def shirt_albedo(index: int) -> np.ndarray:
     """The shirt (3,) RGB 0..1 of the person at 0-based ``index`` of a scene: the plain render's
-    palette colour (:func:`~swarmpose.sim.render.person_albedo`), but teal for the first person,
-    whose palette colour is a skin tone."""
-    return FIRST_SHIRT if index == 0 else person_albedo(index)
+    palette colour (:func:`~swarmpose.sim.render.person_albedo`), but teal where that is the
+    palette's first, a skin tone."""
+    return FIRST_SHIRT if index % len(PERSON_ALBEDOS) == 0 else person_albedo(index)
 
 
 def bone_garments(body: SkinnedBody) -> list[str]:
@@ -59,14 +59,16 @@ def bone_garments(body: SkinnedBody) -> list[str]:
 
 
 def clothing_albedo(body: SkinnedBody, shirt: np.ndarray, index: int) -> np.ndarray:
-    """(F, 3) RGB 0..1 per triangle of ``body``: the garments of :func:`bone_garments` over the
-    bone with the largest skinning weight at each triangle's first vertex; ``shirt`` (3,) the
-    shirt's colour; ``index`` (0-based, the person's place in the scene) picks the skin tone and
-    the trousers."""
+    """(F, 3) RGB 0..1 per triangle of ``body``: the garment (:func:`bone_garments`) of the bone
+    with the largest skinning weight at two or three of the triangle's vertices (at the first
+    where all three differ), so that hems follow the triangles rather than zigzag; ``shirt`` (3,)
+    the shirt's colour; ``index`` (0-based, the person's place in the scene) picks the skin tone
+    and the trousers."""
     colours = {"skin": SKIN_ALBEDOS[index % len(SKIN_ALBEDOS)], "shirt": np.asarray(shirt, float),
                "trousers": TROUSER_ALBEDOS[index % len(TROUSER_ALBEDOS)], "shoes": SHOE_ALBEDO}
-    garments = bone_garments(body)
-    palette = np.array([colours[g] for g in garments])  # (B, 3)
+    palette = np.array([colours[g] for g in bone_garments(body)])  # (B, 3)
     weights = np.asarray(body.skin_weights)
     main_bone = np.take_along_axis(np.asarray(body.skin_indices), np.argmax(weights, axis=1)[:, None], axis=1)[:, 0]
-    return palette[main_bone[np.asarray(body.triangles)[:, 0]]]
+    corners = main_bone[np.asarray(body.triangles)]  # (F, 3) each vertex's main bone
+    pair = corners[:, 1] == corners[:, 2]  # the second and third agree: theirs is the majority
+    return palette[np.where(pair, corners[:, 1], corners[:, 0])]

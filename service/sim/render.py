@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import check_shape
 
 BODY_ALBEDO = np.array([0.87, 0.68, 0.55])
 PERSON_ALBEDOS = (
@@ -126,8 +127,10 @@ class Renderer:
         for k, geometry in enumerate(person_ids):
             body = valid & (geom == geometry)
             labels[body] = k + 1
-            colour = person_albedo(k) if albedos is None else np.asarray(albedos[k], float)
-            albedo[body] = colour[triangle[body]] if colour.ndim == 2 else colour
+            paint = person_albedo(k) if albedos is None else np.asarray(albedos[k], float)
+            if paint.ndim == 2:
+                check_shape(f"person {k + 1}'s albedos (one per triangle)", paint, (len(meshes[k][1]), 3))
+            albedo[body] = paint[triangle[body]] if paint.ndim == 2 else paint
         if room is not None:
             floor = valid & (geom == ids[0])
             wall = valid & (geom == ids[1])

@@ -17,7 +17,7 @@ Output folder (Open3D's RGBD layout plus ground truth)::
 One person (:func:`synthesize`, or :func:`synthesize_people` with one person) writes no
 ``people`` in ``groundtruth.jsonl``: the file is the single-person format, byte for byte.
 Several people (:func:`synthesize_people`, ids 1..P in the order given) are rendered in
-one ray cast so they occlude each other, each in its own shirt colour; each line keeps
+one ray cast so they occlude each other, each in its own colour (dressed: its shirt's); each line keeps
 person 1's top-level fields (old readers see person 1) and adds ``people``: per person
 ``id``, ``pose``, ``joints3d``, ``joints2d``, ``detections`` (keypoints hidden by another
 person are missing), ``visible`` (share of the person's silhouette not hidden by others,
@@ -60,7 +60,8 @@ lies more than this (m) in front of it."""
 
 @dataclass(frozen=True)
 class SynthConfig:
-    """How to film: frames, rate (Hz), camera (m, degrees), noise, detector, skinning, seed."""
+    """How to film: frames, rate (Hz), camera (m, degrees), noise, detector, skinning, seed, and
+    whether the bodies wear clothes (:mod:`swarmpose.sim.clothing`) or one colour each."""
 
     frames: int = 60
     fps: float = 30.0

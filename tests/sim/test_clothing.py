@@ -66,6 +66,47 @@ def test_a_dressed_render_shows_each_garment_where_its_body_part_projects(point,
     assert all(np.abs(seen - _chroma(a)).max() > 0.05 for a in others)
 
 
+def test_a_second_dressed_person_beside_the_room_wears_their_own_clothes():
+    """Per-triangle albedos index each mesh's own triangles (Open3D's primitive ids count within a
+    geometry): person 2, cast after person 1 and before the room, shows its own garments."""
+    from swarmpose.sim.render import Room
+
+    body = load_body("builtin")
+    poses = np.zeros((2, 36))
+    poses[:, 4] = 1.0  # turned 180 degrees about x: upright in the image
+    poses[:, 7:] = body.rest_angles
+    poses[0, :3], poses[1, :3] = (-0.5, 0.0, 3.0), (0.5, 0.0, 3.0)
+    verts = body.pose(poses)
+    room = Room(np.array([0.0, 1.0, 0.0]), np.array([0.0, -1.0, 0.0]), np.array([0.0, 0.0, 5.0]),
+                np.array([0.0, 0.0, -1.0]))
+    shirt = np.array([0.8, 0.3, 0.3])
+    albedos = [clothing_albedo(body, SHIRT, 0), clothing_albedo(body, shirt, 1)]
+    _, colour, labels = Renderer(INTR).render_people([(verts[0], body.triangles), (verts[1], body.triangles)], room,
+                                                     albedos)
+    for point, want in (("left_shoulder", shirt), ("left_knee", TROUSER_ALBEDOS[1]), ("nose", SKIN_ALBEDOS[1])):
+        u, v = np.round(INTR.project(body.posed_points(poses[1:], [point])[0])[0]).astype(int)
+        assert labels[v, u] == 2
+        assert np.abs(_chroma(colour[v, u].astype(float) + 0.5) - _chroma(want)).max() < 0.03
+
+
+def test_one_albedo_per_triangle_all_alike_is_the_plain_render_and_a_wrong_count_is_refused():
+    from swarmpose.core.errors import ShapeError
+    from swarmpose.sim.render import person_albedo
+
+    body = load_body("builtin")
+    pose = np.zeros(36)
+    pose[2], pose[4] = 2.5, 1.0
+    pose[7:] = body.rest_angles
+    mesh = (body.pose(pose[None])[0], body.triangles)
+    renderer = Renderer(INTR)
+    plain = renderer.render_people([mesh])
+    tiled = renderer.render_people([mesh], albedos=[np.tile(person_albedo(0), (len(body.triangles), 1))])
+    for a, b in zip(plain, tiled):
+        np.testing.assert_array_equal(a, b)
+    with pytest.raises(ShapeError, match="person 1"):
+        renderer.render_people([mesh], albedos=[np.tile(person_albedo(0), (len(body.triangles) - 1, 1))])
+
+
 def test_synth_dresses_only_when_asked_and_says_so(tmp_path):
     from swarmpose.cli.main import main
 
@@ -76,7 +117,9 @@ def test_synth_dresses_only_when_asked_and_says_so(tmp_path):
 
     plain, dressed = (cv2.imread(str(tmp_path / n / "color" / "000000.png")) for n in ("plain", "dressed"))
     depth = [cv2.imread(str(tmp_path / n / "depth" / "000000.png"), cv2.IMREAD_UNCHANGED) for n in ("plain", "dressed")]
-    np.testing.assert_array_equal(depth[0], depth[1])  # the depth is the same
+    np.testing.assert_array_equal(depth[0], depth[1])  # the depth is the same, and so is the truth
+    truths = [(tmp_path / n / "groundtruth.jsonl").read_bytes() for n in ("plain", "dressed")]
+    assert truths[0] == truths[1]
     assert np.any(plain != dressed)
     meta = [json.loads((tmp_path / n / "sequence.json").read_text()) for n in ("plain", "dressed")]
     assert [m["clothes"] for m in meta] == [False, True]
