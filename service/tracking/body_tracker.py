@@ -297,16 +297,15 @@ class BodyTracker:
             self.challenger = None
             return best
         again = self.challenger is not None and root_turn_deg(self.challenger, best) <= REPLACED_TURN_DEG
-        own = np.flatnonzero((root_turn_deg(self.previous, result.personal_bests) <= REPLACED_TURN_DEG)
-                             & np.isfinite(result.personal_values))
-        if again or not own.size:  # the same challenger won twice (or nothing is left of the track)
+        own = result.best_among(root_turn_deg(self.previous, result.personal_bests) <= REPLACED_TURN_DEG)
+        if again or own is None:  # the same challenger won twice (or nothing is left of the track)
             self.challenger = None
             self.history.clear()  # the old track's poses are no seeds for the new one
             if self.filter is not None:  # nor are they to be smoothed into the new one
                 self.filter.reset()
             return best
         self.challenger = best
-        return result.personal_bests[own[np.argmin(result.personal_values[own])]].copy()
+        return result.personal_bests[own].copy()
 
     def _filtered(self, result: BodyResult, time_s: float) -> BodyResult:
         """``result`` with its pose through :attr:`filter` and the joints of that pose; the search's own

@@ -94,10 +94,8 @@ def polish_facings(objective: Callable[[np.ndarray], np.ndarray], result: PsoRes
         return result
     poses, values = result.personal_bests.copy(), result.personal_values.copy()
     turned = np.asarray(root_turn_deg(previous, poses)) > turn_deg
-    for side in (~turned, turned):
-        rows = np.flatnonzero(side & np.isfinite(values))
-        if rows.size:
-            k = rows[np.argmin(values[rows])]
+    for k in (result.best_among(~turned), result.best_among(turned)):
+        if k is not None:
             poses[k], values[k] = polish_pose(objective, poses[k], iterations, rng, movable)
     g = int(np.argmin(values))
     return replace(result, best=poses[g].copy(), value=float(values[g]), personal_bests=poses, personal_values=values)

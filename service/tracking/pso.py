@@ -88,6 +88,12 @@ class PsoResult:
     personal_bests: np.ndarray
     personal_values: np.ndarray
 
+    def best_among(self, chosen: np.ndarray) -> int | None:
+        """The index of the lowest finite personal value among the particles ``chosen`` (P,) bool
+        selects (the tracker's: those of one facing); None when none of them has one."""
+        rows = np.flatnonzero(chosen & np.isfinite(self.personal_values))
+        return int(rows[np.argmin(self.personal_values[rows])]) if rows.size else None
+
 
 def _step_within(x: np.ndarray, v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """The velocity shrunk per component so that x + v stays within [lo, hi]."""

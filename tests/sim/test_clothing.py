@@ -19,6 +19,15 @@ INTR = Intrinsics(320, 240, 285.0, 285.0, 159.5, 119.5)
 SHIRT = np.array([0.2, 0.55, 0.6])
 
 
+def _upright(body, x: float = 0.0, z: float = 2.5) -> np.ndarray:
+    """A pose (36,) of ``body`` at rest, ``x`` m to the side and ``z`` m in front of the camera,
+    turned 180 degrees about the camera's x axis: upright in the image (y down)."""
+    pose = np.zeros(36)
+    pose[0], pose[2], pose[4] = x, z, 1.0
+    pose[7:] = body.rest_angles
+    return pose
+
+
 def _garment_of(body, bone: str) -> str:
     return bone_garments(body)[body.bone_names.index(bone)]
 
@@ -50,9 +59,7 @@ def _chroma(rgb: np.ndarray) -> np.ndarray:
                                             ("left_shoulder", "shirt"), ("right_toe", "shoes")])
 def test_a_dressed_render_shows_each_garment_where_its_body_part_projects(point, garment):
     body = load_body("builtin")
-    pose = np.zeros(36)
-    pose[2], pose[4] = 2.5, 1.0  # 2.5 m in front, turned 180 degrees about x: upright in the image
-    pose[7:] = body.rest_angles
+    pose = _upright(body)
     verts = body.pose(pose[None])[0]
     albedo = clothing_albedo(body, SHIRT, 0)
     _, colour, labels = Renderer(INTR).render_people([(verts, body.triangles)], albedos=[albedo])
@@ -72,10 +79,7 @@ def test_a_second_dressed_person_beside_the_room_wears_their_own_clothes():
     from swarmpose.sim.render import Room
 
     body = load_body("builtin")
-    poses = np.zeros((2, 36))
-    poses[:, 4] = 1.0  # turned 180 degrees about x: upright in the image
-    poses[:, 7:] = body.rest_angles
-    poses[0, :3], poses[1, :3] = (-0.5, 0.0, 3.0), (0.5, 0.0, 3.0)
+    poses = np.stack([_upright(body, -0.5, 3.0), _upright(body, 0.5, 3.0)])
     verts = body.pose(poses)
     room = Room(np.array([0.0, 1.0, 0.0]), np.array([0.0, -1.0, 0.0]), np.array([0.0, 0.0, 5.0]),
                 np.array([0.0, 0.0, -1.0]))
@@ -94,10 +98,7 @@ def test_one_albedo_per_triangle_all_alike_is_the_plain_render_and_a_wrong_count
     from swarmpose.sim.render import person_albedo
 
     body = load_body("builtin")
-    pose = np.zeros(36)
-    pose[2], pose[4] = 2.5, 1.0
-    pose[7:] = body.rest_angles
-    mesh = (body.pose(pose[None])[0], body.triangles)
+    mesh = (body.pose(_upright(body)[None])[0], body.triangles)
     renderer = Renderer(INTR)
     plain = renderer.render_people([mesh])
     tiled = renderer.render_people([mesh], albedos=[np.tile(person_albedo(0), (len(body.triangles), 1))])

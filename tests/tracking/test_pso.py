@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from swarmpose.core.errors import ConfigError
-from swarmpose.tracking.pso import PsoConfig, constriction_factor, group_leaders, group_members, minimise
+from swarmpose.tracking.pso import PsoConfig, PsoResult, constriction_factor, group_leaders, group_members, minimise
 
 
 def sphere(x: np.ndarray) -> np.ndarray:
@@ -232,3 +232,14 @@ def test_after_the_merge_a_worse_group_joins_the_best():
             moved[merge_at] += int(np.sum(np.linalg.norm(result.personal_bests[16:], axis=1) < 1.5))
     assert moved[1000] == 0, "never merged: the second group stays in its own basin"
     assert moved[10] >= 8, moved
+
+
+def test_the_best_among_some_particles_skips_the_others_and_non_finite_values():
+    """Hand-set values: the best of the chosen particles is the lowest finite one among them, not
+    the swarm's best; None when every chosen one is non-finite or none is chosen."""
+    values = np.array([0.5, 2.0, np.nan, 1.0, np.inf])
+    result = PsoResult(np.zeros(2), 0.5, values[:1], 5, np.zeros((5, 2)), values)
+    assert result.best_among(np.array([False, True, True, True, True])) == 3
+    assert result.best_among(np.ones(5, bool)) == 0
+    assert result.best_among(np.array([False, False, True, False, True])) is None
+    assert result.best_among(np.zeros(5, bool)) is None
