@@ -14,7 +14,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from swarmpose.body.gltf_write import save_glb
-from swarmpose.cli.common import DEFAULTS, positive_int, quiet
+from swarmpose.cli.common import DEFAULTS, non_negative_int, positive_int, quiet
 from swarmpose.cli.settings import add_flags
 from swarmpose.cli.track import TRACK_SETTINGS, add_source_argument, settings_of
 from swarmpose.core.errors import ConfigError
@@ -31,7 +31,8 @@ def cmd_personalize(args: argparse.Namespace) -> int:
         raise ConfigError(f"--out {args.out}: the body is written as glTF; name a .glb (or .gltf) file")
     if not out.parent.exists():
         raise ConfigError(f"--out {args.out}: folder {out.parent} does not exist")
-    settings = replace(FitSettings(), keyframes=args.keyframes, rounds=args.rounds, seed=config.tracker.seed)
+    settings = replace(FitSettings(), keyframes=args.keyframes, rounds=args.rounds, seed=config.tracker.seed,
+                       own_pose_rounds=args.own_pose_rounds, own_pose_candidates=args.own_pose_candidates)
     result = personalise(config, args.frames, settings, show_progress=not quiet(args))
     fit = result.fit
     measures = body_measures(fit.body)
@@ -40,6 +41,7 @@ def cmd_personalize(args: argparse.Namespace) -> int:
                "stature_measured_m": None if fit.stature_m is None else round(fit.stature_m, 4),
                "stature_frames": fit.stature_frames, "frames_read": result.frames_read,
                "frames_tracked": len(result.samples), "keyframes": len(fit.keyframes),
+               "own_pose_shapes_judged": fit.judged,
                "seconds": round(fit.seconds, 1), "source": config.source, "detector": config.detector}
     body = replace(fit.body, name=f"personalised:{out.stem}",
                    metadata={**fit.body.metadata, "personalised": summary})
@@ -71,6 +73,11 @@ def add_personalize_command(sub: argparse._SubParsersAction, common: argparse.Ar
                    help="well-spread frames the shape is fitted on")
     p.add_argument("--rounds", type=positive_int, default=FitSettings.rounds,
                    help="rounds of shape step then pose step")
+    p.add_argument("--own-pose-rounds", type=non_negative_int, default=FitSettings.own_pose_rounds,
+                   help="the last stage: rounds of the polish that gives each candidate shape poses of its own "
+                        "on every key frame (0: no last stage)")
+    p.add_argument("--own-pose-candidates", type=non_negative_int, default=FitSettings.own_pose_candidates,
+                   help="the last stage: most candidate shapes its search judges (0: no last stage)")
     p.add_argument("--out", required=True, help="the personalised body, .glb")
     p.add_argument("--config", dest="config_file", default=None, help="TOML file of settings ($SWARMPOSE_CONFIG)")
     p.add_argument("--json", action="store_true", help="one JSON object")

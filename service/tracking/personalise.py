@@ -21,6 +21,8 @@ shape space's start body). :func:`fit_shape` chooses ``keyframes`` well-spread f
    per-frame search (``pose_steps`` times), started from the frame's last pose, without the
    depth flips of the limbs (:mod:`~swarmpose.tracking.limb_flips`): a local refinement. Steps 1
    and 2 alternate for ``rounds`` rounds.
+3. **Own poses.** A compass search over the parameters judges each candidate shape with every key
+   frame's pose polished for it (:mod:`~swarmpose.tracking.own_pose_search`).
 
 E_S, the silhouette term: the depth term charges an observed pixel the model misses (T) but not a
 model pixel where nothing is seen, or where the sensor sees farther than T behind the model: a
@@ -95,6 +97,7 @@ from swarmpose.tracking.config import TrackerConfig
 from swarmpose.tracking.depth_dropouts import fill_dropouts
 from swarmpose.tracking.lift_bias import LIMB_BONES, lift_bias, typical_depth
 from swarmpose.tracking.objective import JointTargets, Objective
+from swarmpose.tracking.own_pose_search import FIRST_STEP, LEAST_STEP, compass_search, own_pose_energy
 from swarmpose.tracking.pso import PsoConfig, minimise
 
 log = logging.getLogger(__name__)
@@ -124,9 +127,8 @@ SWEEP = {"gender": (0.0, 1.0), "height": (0.2, 0.5, 0.8)}
 
 @dataclass(frozen=True)
 class FitSettings:
-    """How hard :func:`fit_shape` works: key frames, alternation rounds, the shape PSO's
-    particles and generations, the depth tile of the fit (finer than tracking's: it runs
-    once) and the seed."""
+    """How hard :func:`fit_shape` works: key frames, alternation rounds, the shape PSO's particles and
+    generations, the fit's depth tile (finer than tracking's: it runs once), the seed, stage 3's budget."""
 
     keyframes: int = 12
     rounds: int = 3
@@ -139,6 +141,8 @@ class FitSettings:
     debias_lift: bool = True  # take the lift's own lengthening (lift_bias) off the observed limb lengths
     stature_weight: float = shape_stature.WEIGHT  # E_H (0: off), see shape_stature
     sweep: dict[str, tuple[float, ...]] = field(default_factory=lambda: dict(SWEEP))
+    own_pose_rounds: int = 60  # the last stage's polish per key frame and candidate (0: no last stage)
+    own_pose_candidates: int = 40  # the last stage's budget of candidate shapes (own_pose_search)
 
 
 @dataclass
@@ -158,6 +162,7 @@ class ShapeFit:
     seconds: float = 0.0
     stature_m: float | None = None
     stature_frames: int = 0
+    judged: int = 0  # candidate shapes stage 3 judged with poses of their own (0: it did not run)
 
 
 NOISE_AXES = 1.0
@@ -357,9 +362,22 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
         if progress is not None:
             progress(f"round {round_ + 1}/{settings.rounds}: energy {best.value:.2f}, "
                      + ", ".join(f"{k} {v:.3f}" for k, v in space.parameters(x).items()))
+    count = 0
+    if settings.own_pose_rounds > 0 and settings.own_pose_candidates > 0:
+        starts = [k.pose for k in keys]
+
+        def judged(cand: np.ndarray) -> float:  # the stage's energy: E + w_D·E_S at own poses, and E_H
+            shaped = space.fitting_body(cand)
+            return (own_pose_energy(keys, starts, shaped, settings.own_pose_rounds) + shape_stature.stature_energy(
+                shape_stature.full_height(shaped), stature, settings.stature_weight))
+        x, value, count = compass_search(judged, x, space.lower, space.upper, FIRST_STEP, LEAST_STEP,
+                                         settings.own_pose_candidates)
+        if progress is not None:
+            progress(f"own poses: {count} shapes judged, energy {value:.2f}, "
+                     + ", ".join(f"{k} {v:.3f}" for k, v in space.parameters(x).items()))
     full = space.full_body(x)
     return ShapeFit(x, space.parameters(x), full, space.tracking_body(x), chosen, energies,
-                    time.perf_counter() - t0, stature, measured)
+                    time.perf_counter() - t0, stature, measured, count)
 
 
 def _sweep(space: ShapeSpace, keys: list[_KeyFrame], refit: Callable[[SkinnedBody], float],
