@@ -24,6 +24,19 @@ needs_assets = pytest.mark.skipif(
 )
 
 
+def makehuman_walk(tmp_path_factory, shape: str, frames: int) -> Path:
+    """A synthetic sequence of the MakeHuman ``shape`` walking (CMU 131_01, the personalisation
+    bench's clip) for ``frames`` frames, with ground truth; skips when the assets are absent."""
+    if not MAKEHUMAN.is_dir():
+        pytest.skip(f"MakeHuman assets not found at {MAKEHUMAN}")
+    from swarmpose.cli.main import main
+
+    out = tmp_path_factory.mktemp(shape)
+    assert main(["synth", "--body", f"makehuman:{MAKEHUMAN}", "--shape", shape, "--motion",
+                 str(MOCAP / "bvh11_131_01.bvh"), "--frames", str(frames), "--out", str(out), "--quiet"]) == 0
+    return out
+
+
 def surface_distance(vertices: np.ndarray, triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Unsigned distance (N,) m from points (N, 3) to a triangle mesh, by Open3D's RaycastingScene."""
     import open3d as o3d

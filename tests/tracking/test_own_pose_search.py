@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import MAKEHUMAN, MOCAP, needs_assets
+from conftest import MAKEHUMAN, makehuman_walk, needs_assets
 
 from swarmpose.tracking.own_pose_search import compass_search
 
@@ -54,14 +54,7 @@ def test_the_compass_search_halves_its_step_until_the_least_and_keeps_its_budget
 
 @pytest.fixture(scope="module")
 def female_walk(tmp_path_factory):
-    if not MAKEHUMAN.is_dir():
-        pytest.skip(f"MakeHuman assets not found at {MAKEHUMAN}")
-    from swarmpose.cli.main import main
-
-    out = tmp_path_factory.mktemp("female")
-    assert main(["synth", "--body", f"makehuman:{MAKEHUMAN}", "--shape", "female", "--motion",
-                 str(MOCAP / "bvh11_131_01.bvh"), "--frames", "12", "--out", str(out), "--quiet"]) == 0
-    return out
+    return makehuman_walk(tmp_path_factory, "female", 12)
 
 
 @needs_assets

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
-from conftest import MAKEHUMAN, MOCAP, ValidatingSink, needs_assets
+from conftest import MAKEHUMAN, ValidatingSink, makehuman_walk, needs_assets
 
 from swarmpose.body.shape_space import match_volume
 from swarmpose.tracking.personalise import MAX_CORRECTION, bone_energy, debiased_length, spread_frames
@@ -133,14 +133,7 @@ def test_the_makehuman_fitting_body_encloses_the_full_bodys_volume():
 
 @pytest.fixture(scope="module")
 def tall_walk(tmp_path_factory):
-    if not MAKEHUMAN.is_dir():
-        pytest.skip(f"MakeHuman assets not found at {MAKEHUMAN}")
-    from swarmpose.cli.main import main
-
-    out = tmp_path_factory.mktemp("tall")
-    assert main(["synth", "--body", f"makehuman:{MAKEHUMAN}", "--shape", "male-tall", "--motion",
-                 str(MOCAP / "bvh11_131_01.bvh"), "--frames", "16", "--out", str(out), "--quiet"]) == 0
-    return out
+    return makehuman_walk(tmp_path_factory, "male-tall", 16)
 
 
 def _first_hit_z(origin_dir: np.ndarray, vertices: np.ndarray, triangles: np.ndarray) -> float:

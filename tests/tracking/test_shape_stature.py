@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import MAKEHUMAN, MOCAP
+from conftest import MAKEHUMAN, makehuman_walk
 
 from swarmpose.tracking.shape_stature import BAND, measured_stature, stature_energy
 
@@ -28,19 +28,14 @@ def walk_samples(tmp_path_factory):
     """A MakeHuman female-slim subject (1.605 m) walking CMU 131_01 at 3 m, 16 frames, tracked with
     the simulated detector's joints by the default MakeHuman body (1.75 m) as a fit's samples are:
     (samples, the tracking body, the subject's body, camera)."""
-    if not MAKEHUMAN.is_dir():
-        pytest.skip(f"MakeHuman assets not found at {MAKEHUMAN}")
     from swarmpose.body.loader import load_body
-    from swarmpose.cli.main import main
     from swarmpose.detect.registry import make_detector
     from swarmpose.sources.registry import open_source
     from swarmpose.tracking.body_tracker import BodyTracker
     from swarmpose.tracking.config import TrackerConfig
     from swarmpose.tracking.personalise import ShapeSample
 
-    out = tmp_path_factory.mktemp("walk")
-    assert main(["synth", "--body", f"makehuman:{MAKEHUMAN}", "--shape", "female-slim", "--motion",
-                 str(MOCAP / "bvh11_131_01.bvh"), "--frames", "16", "--out", str(out), "--quiet"]) == 0
+    out = makehuman_walk(tmp_path_factory, "female-slim", 16)
     source = open_source(str(out))
     detector = make_detector("simulated", source)
     tracker = None
