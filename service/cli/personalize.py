@@ -74,10 +74,11 @@ def add_personalize_command(sub: argparse._SubParsersAction, common: argparse.Ar
     p.add_argument("--rounds", type=positive_int, default=FitSettings.rounds,
                    help="rounds of shape step then pose step")
     p.add_argument("--own-pose-rounds", type=non_negative_int, default=FitSettings.own_pose_rounds,
-                   help="the last stage: rounds of the polish that gives each candidate shape poses of its own "
-                        "on every key frame (0: no last stage)")
+                   help="the last stage (MakeHuman bodies): rounds of the polish that gives each candidate shape "
+                        "poses of its own on every key frame (0: no last stage)")
     p.add_argument("--own-pose-candidates", type=non_negative_int, default=FitSettings.own_pose_candidates,
-                   help="the last stage: most candidate shapes its search judges (0: no last stage)")
+                   help="the last stage: about this many candidate shapes its search judges (the round that "
+                        "reaches it finishes; 0: no last stage)")
     p.add_argument("--out", required=True, help="the personalised body, .glb")
     p.add_argument("--config", dest="config_file", default=None, help="TOML file of settings ($SWARMPOSE_CONFIG)")
     p.add_argument("--json", action="store_true", help="one JSON object")

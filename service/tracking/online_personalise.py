@@ -2,8 +2,9 @@
 
 :class:`PersonalisingTracker` tracks with the shape space's start body, keeps the first N frames
 it tracked (depth and detection; colour is dropped), then fits the shape on them
-(:func:`~swarmpose.tracking.personalise.fit_shape`, in the tracking thread: that frame takes
-the fit's seconds), takes the new body and locks it for the rest of the run. Each person of a
+(:func:`~swarmpose.tracking.personalise.fit_shape` with its default settings, the last stage of
+own poses included, in the tracking thread: that frame takes the fit's seconds), takes the new body
+and locks it for the rest of the run. Each person of a
 several-people run has a tracker of their own, so each is personalised on their own frames, and
 only on frames where no one else hides them (:data:`MAX_HIDDEN_SHARE`): a person partly behind
 another was fitted to what was left of them (the 3-person crossing's waver, 2 m behind two

@@ -12,15 +12,20 @@ A candidate's energy (:func:`own_pose_energy`): every key frame's pose, from whe
 alternation left it, is moved to the candidate's best root offset
 (:meth:`~swarmpose.tracking.personalise._KeyFrame.energy`) and polished on that frame's objective
 with the candidate's body (:func:`~swarmpose.tracking.pose_polish.polish_pose`, every
-coordinate); the energy is the mean of the polished values plus the stature term E_H. The polish
+coordinate); the energy is the mean of the polished values plus the stature term E_H. The bone
+term E_B is left out: its lengths are corrected by the lift's bias on the shape being judged, which
+costs 1.5-2 s a shape (:mod:`~swarmpose.tracking.personalise`), more than the judgement itself. The polish
 of key frame i draws the same random numbers for every candidate (common random numbers), so the
 energy is a deterministic function of the shape: two candidates differ by their shapes, not by
 the luck of their polish.
 
 The search (:func:`compass_search`): from the alternation's result, each parameter moved by
 ±step (a share of its range: 0.15 of a MakeHuman slider's 0..1 at first), the best improvement
-taken, the step halved when none improves, until the step falls below ``min_step`` or
-``budget`` candidates have been judged. Each judgement costs a polish of
+taken, the step halved when none improves, until the step falls below ``min_step`` (at
+:data:`FIRST_STEP` and :data:`LEAST_STEP`: steps of 0.15 and 0.075 only) or the budget is spent (the
+round that reaches it finishes: up to 2D - 1 more, D the parameters). Only MakeHuman's space gets
+the stage (:func:`~swarmpose.tracking.personalise.fit_shape`): the built-in body's ranges (a first
+step of 9 cm of stature) were not measured. Each judgement costs a polish of
 every key frame (about a second for 12 frames at 60 rounds on the 2-core VM), so the budget is
 tens of candidates, which rules out a population method; scipy's bounded local methods (Powell,
 Nelder-Mead) start with a line search or a simplex of one candidate per dimension and do not

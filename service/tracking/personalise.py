@@ -128,7 +128,7 @@ SWEEP = {"gender": (0.0, 1.0), "height": (0.2, 0.5, 0.8)}
 @dataclass(frozen=True)
 class FitSettings:
     """How hard :func:`fit_shape` works: key frames, alternation rounds, the shape PSO's particles and
-    generations, the fit's depth tile (finer than tracking's: it runs once), the seed, stage 3's budget."""
+    generations, the fit's depth tile (finer than tracking's: it runs once), the seed, the last stage's budget."""
 
     keyframes: int = 12
     rounds: int = 3
@@ -142,16 +142,15 @@ class FitSettings:
     stature_weight: float = shape_stature.WEIGHT  # E_H (0: off), see shape_stature
     sweep: dict[str, tuple[float, ...]] = field(default_factory=lambda: dict(SWEEP))
     own_pose_rounds: int = 60  # the last stage's polish per key frame and candidate (0: no last stage)
-    own_pose_candidates: int = 40  # the last stage's budget of candidate shapes (own_pose_search)
+    own_pose_candidates: int = 40  # its budget of candidates (own_pose_search.compass_search; 0: no last stage)
 
 
 @dataclass
 class ShapeFit:
-    """The result: parameters ``x`` (D,) and by name, the full-resolution and tracking bodies,
-    the key frames (indices into the samples that had a pose), the energy after each round (each
-    against that round's E_B targets, see the module docstring), seconds, and the stature measured
-    on the depth with the frames it was measured on (None: too few upright frames, or the term is
-    off)."""
+    """The result: parameters ``x`` (D,) and by name, the full-resolution and tracking bodies, the key
+    frames (indices into the samples that had a pose), the energy after each round (each against that
+    round's E_B targets, see the module docstring), seconds, and the stature measured on the depth
+    with the frames it was measured on (None: too few upright frames, or the term is off)."""
 
     x: np.ndarray
     parameters: dict[str, float]
@@ -162,7 +161,7 @@ class ShapeFit:
     seconds: float = 0.0
     stature_m: float | None = None
     stature_frames: int = 0
-    judged: int = 0  # candidate shapes stage 3 judged with poses of their own (0: it did not run)
+    judged: int = 0  # shapes the last stage judged with poses of their own, the start's not counted (0: not run)
 
 
 NOISE_AXES = 1.0
@@ -323,9 +322,12 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
             progress("lift bias: " + ", ".join(f"{a.replace('left_', 'L ').replace('right_', 'R ')}-"
                                                f"{b.split('_', 1)[1]} {100 * v:+.1f} cm" for (a, b), v in bias.items()))
 
+    def height_term(shaped: SkinnedBody) -> float:  # E_H
+        return shape_stature.stature_energy(shape_stature.full_height(shaped), stature, settings.stature_weight)
+
     def energy_of(shaped: SkinnedBody) -> float:
         return (sum(k.energy(shaped) for k in keys) / len(keys) + settings.bone_weight * bone_energy(shaped, bones)
-                + shape_stature.stature_energy(shape_stature.full_height(shaped), stature, settings.stature_weight))
+                + height_term(shaped))
 
     def shape_energy(candidates: np.ndarray) -> np.ndarray:
         return np.array([energy_of(space.fitting_body(cand)) for cand in candidates])
@@ -362,18 +364,16 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
         if progress is not None:
             progress(f"round {round_ + 1}/{settings.rounds}: energy {best.value:.2f}, "
                      + ", ".join(f"{k} {v:.3f}" for k, v in space.parameters(x).items()))
-    count = 0
-    if settings.own_pose_rounds > 0 and settings.own_pose_candidates > 0:
+    count = 0  # the last stage: MakeHuman's only (measured there; the built-in body's ranges were not)
+    if settings.own_pose_rounds > 0 and settings.own_pose_candidates > 0 and space.kind == "makehuman":
         starts = [k.pose for k in keys]
-
-        def judged(cand: np.ndarray) -> float:  # the stage's energy: E + w_D·E_S at own poses, and E_H
+        def own_pose_value(cand: np.ndarray) -> float:  # E + w_D·E_S at poses of its own, and E_H (no E_B)
             shaped = space.fitting_body(cand)
-            return (own_pose_energy(keys, starts, shaped, settings.own_pose_rounds) + shape_stature.stature_energy(
-                shape_stature.full_height(shaped), stature, settings.stature_weight))
-        x, value, count = compass_search(judged, x, space.lower, space.upper, FIRST_STEP, LEAST_STEP,
+            return own_pose_energy(keys, starts, shaped, settings.own_pose_rounds) + height_term(shaped)
+        x, value, count = compass_search(own_pose_value, x, space.lower, space.upper, FIRST_STEP, LEAST_STEP,
                                          settings.own_pose_candidates)
         if progress is not None:
-            progress(f"own poses: {count} shapes judged, energy {value:.2f}, "
+            progress(f"own poses: {count} shapes judged, energy {value:.2f} (at polished poses, without E_B), "
                      + ", ".join(f"{k} {v:.3f}" for k, v in space.parameters(x).items()))
     full = space.full_body(x)
     return ShapeFit(x, space.parameters(x), full, space.tracking_body(x), chosen, energies,

@@ -42,6 +42,13 @@ def test_the_compass_search_stays_in_the_box_and_scales_its_step_by_each_range()
     np.testing.assert_allclose(first, [[0.25, 1.0], [0.75, 1.0], [0.5, 0.0], [0.5, 2.0]])
 
 
+def test_the_compass_search_skips_the_moves_the_box_cancels():
+    energy, calls = _counting(lambda x: 0.0)
+    _, _, judged = compass_search(energy, np.zeros(3), np.zeros(3), np.ones(3), 0.15, 0.1, 1000)
+    assert judged == 3  # from the corner only the three moves inward, then 0.075 < 0.1 stops it
+    np.testing.assert_allclose(np.array(calls[1:]), 0.15 * np.eye(3))
+
+
 def test_the_compass_search_halves_its_step_until_the_least_and_keeps_its_budget():
     energy, calls = _counting(lambda x: 0.0)  # nothing ever improves
     x, _, judged = compass_search(energy, np.array([0.5, 0.5, 0.5]), np.zeros(3), np.ones(3), 0.15, 0.04, 1000)
