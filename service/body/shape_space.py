@@ -43,6 +43,9 @@ class ShapeSpace(ABC):
     names: tuple[str, ...] = ()
     lower: np.ndarray
     upper: np.ndarray
+    own_pose_stage: bool = False
+    """Whether a fit ends with the own-pose search (:mod:`~swarmpose.tracking.own_pose_search`): only
+    where its steps, shares of each parameter's range, were measured."""
 
     def __init__(self, triangles: int = 1500):
         self.triangles = int(triangles)
@@ -130,6 +133,7 @@ class MakeHumanSpace(ShapeSpace):
     """The MakeHuman body over its macro sliders (gender, caucasian, muscle, weight, height)."""
 
     kind = "makehuman"
+    own_pose_stage = True  # BENCHMARKS.md, personalisation eleventh part
 
     def __init__(self, directory: str | Path, triangles: int = 1500):
         from swarmpose.body.makehuman_macros import MACRO_NAMES, MacroShape

@@ -128,9 +128,10 @@ class Renderer:
             body = valid & (geom == geometry)
             labels[body] = k + 1
             paint = person_albedo(k) if albedos is None else np.asarray(albedos[k], float)
-            if paint.ndim == 2:
+            if paint.ndim == 2:  # one per triangle
                 check_shape(f"person {k + 1}'s albedos (one per triangle)", paint, (len(meshes[k][1]), 3))
-            albedo[body] = paint[triangle[body]] if paint.ndim == 2 else paint
+                paint = paint[triangle[body]]
+            albedo[body] = paint
         if room is not None:
             floor = valid & (geom == ids[0])
             wall = valid & (geom == ids[1])

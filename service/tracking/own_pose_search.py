@@ -70,12 +70,22 @@ def compass_search(energy: Callable[[np.ndarray], float], x: np.ndarray, lower: 
     judges every parameter moved by ±``step`` times its range ``upper - lower`` (clipped to the
     box; moves the box cancels are skipped), moves to the best candidate if it beats the current
     one, else halves the step; stops when the step falls below ``min_step`` or ``budget``
-    candidates have been judged (a round is finished once begun). Returns (x, its energy,
-    candidates judged)."""
+    candidates have been judged (a round is finished once begun). A point judged before (the one a
+    move came from is a candidate of the next round) takes its known energy instead of another
+    call; it still counts against the budget. Returns (x, its energy, candidates judged)."""
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
     x = np.clip(np.asarray(x, float), lower, upper)
     span = upper - lower
-    value, judged = float(energy(x)), 0
+    known: list[tuple[np.ndarray, float]] = []
+
+    def judge(c: np.ndarray) -> float:
+        for point, v in known:
+            if np.allclose(point, c, rtol=0.0, atol=1e-12):
+                return v
+        known.append((c, float(energy(c))))
+        return known[-1][1]
+
+    value, judged = judge(x), 0
     while step >= min_step and judged < budget:
         candidates = []
         for i in range(len(x)):
@@ -86,7 +96,7 @@ def compass_search(energy: Callable[[np.ndarray], float], x: np.ndarray, lower: 
                     candidates.append(c)
         if not candidates:
             break
-        values = [float(energy(c)) for c in candidates]
+        values = [judge(c) for c in candidates]
         judged += len(candidates)
         best = int(np.argmin(values))
         if values[best] < value:

@@ -364,8 +364,8 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
         if progress is not None:
             progress(f"round {round_ + 1}/{settings.rounds}: energy {best.value:.2f}, "
                      + ", ".join(f"{k} {v:.3f}" for k, v in space.parameters(x).items()))
-    count = 0  # the last stage: MakeHuman's only (measured there; the built-in body's ranges were not)
-    if settings.own_pose_rounds > 0 and settings.own_pose_candidates > 0 and space.kind == "makehuman":
+    count = 0  # the last stage, where the space was measured with it (MakeHuman's)
+    if settings.own_pose_rounds > 0 and settings.own_pose_candidates > 0 and space.own_pose_stage:
         starts = [k.pose for k in keys]
         def own_pose_value(cand: np.ndarray) -> float:  # E + w_D·E_S at poses of its own, and E_H (no E_B)
             shaped = space.fitting_body(cand)

@@ -23,12 +23,14 @@ def _counting(f):
 
 def test_the_compass_search_walks_a_quadratic_to_its_minimum_within_the_least_step():
     target = np.array([0.3, 0.7])
-    energy, _ = _counting(lambda x: float(np.sum((x - target) ** 2)))
+    energy, calls = _counting(lambda x: float(np.sum((x - target) ** 2)))
     x, value, judged = compass_search(energy, np.array([0.9, 0.1]), np.zeros(2), np.ones(2), 0.15, 0.01, 1000)
     # steps 0.15, 0.075, 0.0375, 0.01875: 0.9 -> 0.3 in four moves of 0.15, 0.1 -> 0.7 likewise
     np.testing.assert_allclose(x, target, atol=0.01)
     assert value == pytest.approx(float(np.sum((x - target) ** 2)))
     assert judged % 4 == 0  # whole rounds of 2 x 2 candidates
+    # a move's starting point (and any other point seen before) comes back as a candidate: never judged twice
+    assert len({tuple(np.round(c, 9)) for c in calls}) == len(calls) < 1 + judged - 8
 
 
 def test_the_compass_search_stays_in_the_box_and_scales_its_step_by_each_range():
