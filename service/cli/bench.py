@@ -126,8 +126,8 @@ def _add_assets(p: argparse.ArgumentParser) -> None:
 
 
 def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
-    """--arm-prior, --limb-flips, --hidden-lifts, --arm-proposals, --hypotheses, --backward and --polish of the
-    resumable tracking benchmarks (a record keeps them, so a resume with other values tracks again)."""
+    """--arm-prior, --limb-flips, --hidden-lifts, --arm-proposals, --hypotheses, --backward, --smoothing and
+    --polish of the resumable tracking benchmarks (a record keeps them, so a resume with other values tracks again)."""
     p.add_argument("--arm-prior", type=non_negative_float, default=0.0,
                    help="the tracker's w_A (cost per rad² of the arms away from rest, times how side on the "
                         "person stands; 0 = off, the tracker's default)")
@@ -145,6 +145,9 @@ def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
     p.add_argument("--backward", type=non_negative_int, default=0, metavar="N",
                    help="the offline backward pass: every N frames each track run backwards over them from its "
                         "last solution (0: off, the tracker's default; N >= --frames: the whole sequence)")
+    p.add_argument("--smoothing", choices=("off", "centred"), default="off",
+                   help="centred: each published pose smoothed with the frames either side (the recordings' "
+                        "smoothing, --smoothing-sigma-s 0.05 s; off: the tracker's default)")
     p.add_argument("--polish", type=non_negative_int, default=60, metavar="N",
                    help="N rounds of the local polish after each frame's search, hybrid mode only (60: the tracker's "
                         "default; 0: off)")
@@ -152,7 +155,8 @@ def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
 
 def _tracker_switches(args: argparse.Namespace) -> dict:
     """The values of :func:`_add_tracker_switches`' options, by their tracker setting's name."""
-    names = ("arm_prior", "limb_flips", "hidden_lifts", "arm_proposals", "hypotheses", "backward", "polish")
+    names = ("arm_prior", "limb_flips", "hidden_lifts", "arm_proposals", "hypotheses", "backward", "smoothing",
+             "polish")
     return {name: getattr(args, name) for name in names}
 
 

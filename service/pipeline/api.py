@@ -85,7 +85,8 @@ class Tracker:
                    else BodyTracker)
         self.pipeline = FramePipeline(
             self.detector, lambda intr, body_id: tracker(self.body, intr, self.config, body_id=body_id),
-            self.config.max_people, self.config.retire_frames, backward=self.config.backward)
+            self.config.max_people, self.config.retire_frames, backward=self.config.backward,
+            centred_sigma_s=self.config.centred_sigma_s)
         self._next_index = 0
         self._closed = False
 
@@ -117,6 +118,10 @@ class Tracker:
             raise ConfigError(f"backward = {self.config.backward}: the backward pass needs the frames after this "
                               "one; track a whole recording with swarmpose.track(source, backward=N), or set "
                               "backward 0")
+        if self.config.centred_sigma_s:
+            raise ConfigError("smoothing centred averages each pose with the frames after it; track a whole "
+                              "recording with swarmpose.track(source, smoothing='centred'), or use "
+                              "smoothing='one-euro' frame by frame")
         self._next_index = frame.index + 1
         return self.pipeline.process(frame)
 

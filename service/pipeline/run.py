@@ -3,8 +3,8 @@
 ``swarmpose track`` and ``eval``, and :func:`swarmpose.track`, use it. Each frame's
 result goes, as the protocol's frame message, to every sink (files, scoring, ...) before
 the next frame is read, so an interrupted run keeps everything it produced (with the
-``backward`` setting, a window's frames go after its backward pass, and a stop or an error
-hands on those held first). A sink that
+``backward`` setting, a window's frames go after its backward pass, and with centred smoothing
+3σ of frames are held; a stop or an error hands on those held first). A sink that
 fails is logged and dropped; the others go on. A source that ends with ``status`` ``"error: …"``
 (a recording that breaks, a camera that vanishes) is logged as a warning and, in a
 :class:`RunSummary`, kept as ``source_error``.
@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 from swarmpose.core.progress import progress_bar
 from swarmpose.pipeline.backward import BackwardPass
+from swarmpose.pipeline.centred_smoothing import CentredSmoother
 from swarmpose.pipeline.step import FramePipeline, describe_error
 from swarmpose.publish.sink import Sink
 from swarmpose.sources.base import Frame, SkippedFrame
@@ -70,12 +71,20 @@ def results(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline, fra
     No item is read past the ``frames``-th, nor once ``stop`` is set (``summary.interrupted``). With
     the pipeline's ``backward`` window, each window's results come after its backward pass
     (:mod:`swarmpose.pipeline.backward`), counted with its time; when the items end, the last ones;
-    when the run is stopped or fails, those held as the forward pass left them."""
+    when the run is stopped or fails, those held as the forward pass left them. With its
+    ``centred_sigma_s``, the results (after the backward pass) come 3σ late with their poses smoothed
+    (:mod:`swarmpose.pipeline.centred_smoothing`); a stop smooths the frames held with those there
+    are, a failure hands them on as found."""
     summary = summary if summary is not None else RunSummary()
     refiner = BackwardPass(pipeline.backward, stop) if pipeline.backward else None
     if refiner is not None:
         pipeline.on_step = refiner.record
+    smoother = CentredSmoother(pipeline.centred_sigma_s) if pipeline.centred_sigma_s else None
     seconds: dict[int, float] = {}  # each result's forward time until it is counted
+
+    def smoothed(done: list[FrameResult]) -> list[FrameResult]:
+        return done if smoother is None else [out for result in done for out in smoother.add(result)]
+
     items, read = iter(source), 0
     try:
         while not (frames and read >= frames):
@@ -89,21 +98,28 @@ def results(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline, fra
             t0 = time.perf_counter()
             result = pipeline.process(item)
             seconds[result.index] = 0.0 if result.skipped else time.perf_counter() - t0
-            yield from _counted([result] if refiner is None else refiner.add(result), seconds, summary)
+            if smoother is not None:
+                smoother.note_bodies(result, pipeline.body_of, pipeline.intrinsics)
+            yield from _counted(smoothed([result] if refiner is None else refiner.add(result)), seconds, summary)
         if refiner is not None:
             done = refiner.release() if summary.interrupted else refiner.finish()
-            yield from _counted(done, seconds, summary)
+            yield from _counted(smoothed(done), seconds, summary)
+        if smoother is not None:
+            yield from _counted(smoother.finish(), seconds, summary)
     except Exception:
-        if refiner is not None:  # what was held goes out as the forward pass left it, then the error
-            yield from _counted(refiner.release(), seconds, summary)
+        held = [] if smoother is None else smoother.release()  # the earlier frames: as found, then the error
+        if refiner is not None:  # what was held goes out as the forward pass left it
+            held += refiner.release()
+        yield from _counted(held, seconds, summary)
         raise
 
 
 def _counted(done: list[FrameResult], seconds: dict[int, float], summary: RunSummary) -> Iterator[FrameResult]:
-    """``done`` (results handed on, after the backward pass if any) counted in ``summary`` with
-    their forward time from ``seconds`` and their backward time."""
+    """``done`` (results handed on, after the backward pass and the smoothing if any) counted in
+    ``summary`` with their forward time from ``seconds``, their backward time and their smoothing's."""
     for result in done:
-        summary.count(result, seconds.pop(result.index, 0.0) + result.timings_ms.get("backward", 0.0) / 1000)
+        extra_ms = result.timings_ms.get("backward", 0.0) + result.timings_ms.get("smoothing", 0.0)
+        summary.count(result, seconds.pop(result.index, 0.0) + extra_ms / 1000)
         yield result
 
 

@@ -89,7 +89,8 @@ def make_pipeline(body: SkinnedBody, detector: Detector, config: ServiceConfig,
         def make(intrinsics, body_id):
             return BodyTracker(body, intrinsics, t, body_id=body_id)
     return FramePipeline(detector, make, t.max_people, t.retire_frames, personalise_frames=reported,
-                         world=make_world(config.floor, config.coordinates), backward=t.backward)
+                         world=make_world(config.floor, config.coordinates), backward=t.backward,
+                         centred_sigma_s=t.centred_sigma_s)
 
 
 def warn_of_another_body(source: FrameSource, body: SkinnedBody, config: ServiceConfig) -> None:
@@ -176,6 +177,10 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
         raise ConfigError(f"backward = {config.tracker.backward}: the backward pass publishes frames late and needs "
                           "the recording, which serve and replay do not wait for; run `swarmpose track SOURCE --out "
                           "DIR --backward N` (the same files as replay), or set backward 0")
+    if config.tracker.centred_sigma_s:
+        raise ConfigError("smoothing centred averages each pose with the frames after it, which serve and replay "
+                          "do not wait for; run `swarmpose track SOURCE --out DIR --smoothing centred` (the same "
+                          "files as replay), or use smoothing one-euro live")
     parts = open_parts(config, stack, out=out or config.record)
     worker: Worker | None = None
 

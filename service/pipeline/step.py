@@ -104,15 +104,17 @@ class FramePipeline:
     frames), else 0; world: the camera's
     world frame (floor, origin, coordinates of the messages), None: camera frame only;
     backward: the offline backward pass's window in frames (:mod:`swarmpose.pipeline.backward`,
-    run by :func:`swarmpose.pipeline.run.results`), 0: none.
+    run by :func:`swarmpose.pipeline.run.results`), 0: none; centred_sigma_s: σ (s) of the
+    offline centred smoothing of the published poses (:mod:`swarmpose.pipeline.centred_smoothing`,
+    run there too), 0: none.
     ``detect`` and ``track`` may run in two threads (one each).
     """
 
     def __init__(self, detector: Detector, make_tracker: Callable[[Intrinsics, int], BodyTracker],
                  max_people: int = 1, retire_frames: int = 30, personalise_frames: int = 0,
-                 world: WorldFrame | None = None, backward: int = 0):
+                 world: WorldFrame | None = None, backward: int = 0, centred_sigma_s: float = 0.0):
         self.detector, self.make_tracker = detector, make_tracker
-        self.backward = int(backward)
+        self.backward, self.centred_sigma_s = int(backward), float(centred_sigma_s)
         self.on_step = None
         """Given to every tracker made from now on as its ``on_step`` (the offline backward pass)."""
         self.max_people, self.retire_frames = int(max_people), int(retire_frames)

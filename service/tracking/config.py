@@ -11,7 +11,7 @@ from swarmpose.tracking.objective import ObjectiveWeights
 from swarmpose.tracking.pso import VARIANTS, PsoConfig
 
 MODES = ("hybrid", "depth", "joints", "lift")
-SMOOTHING = ("off", "one-euro")
+SMOOTHING = ("off", "one-euro", "centred")
 MODE_WEIGHTS = {"hybrid": (3.0, 1.0), "depth": (1.0, 0.0), "joints": (0.0, 1.0)}
 """(w_D, w_J) of each mode; ``lift`` fits no model."""
 
@@ -78,13 +78,18 @@ class TrackerConfig:
                                "frames get the backward fit, published this many frames late (a track's start "
                                "and a side view's limbs settle over frames, which the backward pass starts "
                                "with); 0 = off. Not with serve, replay or Tracker.track_frame (live), the lift "
-                               "mode or one-euro smoothing",
+                               "mode or one-euro smoothing (centred smoothing runs after it)",
                             minimum=0)
     auto_height: bool = setting(True, "a body whose shape is not given (no --shape, not a .glb) is scaled to each "
                                       "person's height, measured on the depth of their first upright frames")
-    smoothing: str = setting("off", "smooth the published poses: off (as in evaluation) or one-euro (a One-Euro "
-                                    "filter; the search itself always starts from the unfiltered pose)",
+    smoothing: str = setting("off", "smooth the published poses: off (as in evaluation), one-euro (a One-Euro "
+                                    "filter, live) or centred (recordings only: each pose read off a straight line "
+                                    "fitted, Gaussian-weighted, through the person's poses within 3 sigma either "
+                                    "side; published 3 sigma late); the search always starts from the unsmoothed "
+                                    "pose",
                              choices=SMOOTHING)
+    smoothing_sigma_s: float = setting(0.05, "centred: the Gaussian's sigma in time, s (larger: steadier, "
+                                             "fast motion flattened)", minimum=0.001)
     smoothing_cutoff_hz: float = setting(4.0, "One-Euro: the cut-off at rest, Hz (lower: steadier, more lag)",
                                          minimum=0.01)
     smoothing_beta: float = setting(10.0, "One-Euro: how fast the cut-off rises with speed, s per m or rad (higher: "
@@ -105,10 +110,10 @@ class TrackerConfig:
         if self.backward and self.mode == "lift":
             raise ConfigError(f"backward = {self.backward}: the backward pass refits a body model; the lift mode fits "
                               "none (use hybrid, depth or joints, or backward 0)")
-        if self.backward and self.smoothing != "off":
+        if self.backward and self.smoothing == "one-euro":
             raise ConfigError(f"backward = {self.backward} with smoothing {self.smoothing}: the backward pass "
                               "publishes its own fits, which the filter would have to run over backwards; choose "
-                              "one (smoothing off, or backward 0)")
+                              "one (smoothing off or centred, or backward 0)")
         if 0 < self.personalize < 3:
             raise ConfigError(f"personalize = {self.personalize}: a shape needs at least 3 tracked frames "
                               "(0 turns personalisation off)")
@@ -117,6 +122,12 @@ class TrackerConfig:
         """The generation of a ``generations``-long PSO from which it scores at full resolution
         (0: all of them)."""
         return min(int(round(self.coarse_share * generations)), generations)
+
+    @property
+    def centred_sigma_s(self) -> float:
+        """σ (s) of the centred smoothing of recordings (:mod:`swarmpose.pipeline.centred_smoothing`), 0
+        when it is not asked for."""
+        return self.smoothing_sigma_s if self.smoothing == "centred" else 0.0
 
     @property
     def pso_config(self) -> PsoConfig:

@@ -131,3 +131,16 @@ def test_the_polish_acts_in_the_hybrid_records_only_and_older_records_read_as_wi
         write_record(old, {"mpjpe_mm": 45.0, **{k: v for k, v in settings.items() if k != "polish"}})
         assert (read_record(old, settings) is None) == (mode == "hybrid"), mode
         assert read_record(old, mode_settings(tracker_settings({"polish": 0}), mode))["mpjpe_mm"] == 45.0
+
+
+def test_records_without_smoothing_resume_runs_without_it_and_lift_never_gets_it(tmp_path):
+    """``smoothing`` is stored with every record; records made before it existed were unsmoothed ("off",
+    still the default), and the lift mode, which publishes no pose to smooth, is always made "off"."""
+    from swarmpose.bench.store import mode_settings
+
+    old = tmp_path / "old.json"
+    write_record(old, {"mpjpe_mm": 40.0, **{k: v for k, v in tracker_settings(None).items() if k != "smoothing"}})
+    assert read_record(old, tracker_settings(None))["mpjpe_mm"] == 40.0
+    assert read_record(old, tracker_settings({"smoothing": "centred"})) is None
+    assert mode_settings(tracker_settings({"smoothing": "centred"}), "lift")["smoothing"] == "off"
+    assert mode_settings(tracker_settings({"smoothing": "centred"}), "hybrid")["smoothing"] == "centred"

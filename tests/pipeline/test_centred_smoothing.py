@@ -1,0 +1,211 @@
+"""The centred smoothing of recordings (``--smoothing centred``): the line fit, where trajectories
+are cut, when results come, and a tracked run's published poses against its found ones."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import swarmpose
+from swarmpose.body.loader import load_body
+from swarmpose.body.skeleton import ANGLE_LIMITS, ANGLES, EVAL_JOINTS, POSE_DIM, ROOT_QUATERNION
+from swarmpose.cli.main import main
+from swarmpose.core.camera import Intrinsics
+from swarmpose.core.errors import ConfigError
+from swarmpose.pipeline.centred_smoothing import CentredSmoother, local_linear_pose, segment_starts
+from swarmpose.sources.groundtruth import load_ground_truth
+from swarmpose.sources.registry import open_source
+from swarmpose.tracking.config import TrackerConfig
+from swarmpose.tracking.result import BodyResult, FrameResult
+
+CAMERA = Intrinsics(640, 480, 525.0, 525.0, 319.5, 239.5)
+FRAME_NS = 33_333_333
+SIGMA_S = 0.05  # span 0.15 s: a frame goes out once one 5 frames (0.167 s) later has come
+
+
+def _upright(x: float = 0.0, z: float = 3.0) -> np.ndarray:
+    pose = np.zeros(POSE_DIM)
+    pose[:3] = (x, 0.0, z)
+    pose[ROOT_QUATERNION] = (0.0, 1.0, 0.0, 0.0)  # upright, facing the camera
+    return pose
+
+
+def _turned(pose: np.ndarray, radians: float) -> np.ndarray:
+    out = pose.copy()
+    q = Rotation.from_rotvec([0.0, radians, 0.0]) * Rotation.from_quat(np.roll(pose[ROOT_QUATERNION], -1))
+    out[ROOT_QUATERNION] = np.roll(q.as_quat(), 1)
+    return out
+
+
+@pytest.fixture(scope="module")
+def body():
+    return load_body("builtin")
+
+
+def _result(body, index: int, pose: np.ndarray | None, state: str = "tracking", body_id: int = 0,
+            stamp_ns: int | None = None) -> FrameResult:
+    """A frame result with one body whose joints are ``body`` posed at ``pose`` (none: lost)."""
+    n = len(EVAL_JOINTS)
+    if pose is None:
+        bodies = (BodyResult(body_id, "lost", "", None, np.full((n, 3), np.nan), np.full((n, 2), np.nan),
+                             np.zeros(n)),)
+    else:
+        joints3d = body.posed_points(pose[None], EVAL_JOINTS)[0]
+        bodies = (BodyResult(body_id, state, "", pose, joints3d, CAMERA.project(joints3d), np.ones(n)),)
+    return FrameResult(index, index * FRAME_NS if stamp_ns is None else stamp_ns, bodies)
+
+
+def _smooth(body, results: list[FrameResult], sigma_s: float = SIGMA_S) -> tuple[list[FrameResult], list[int]]:
+    """Every result through a smoother; also how many results each ``add`` handed on."""
+    smoother = CentredSmoother(sigma_s)
+    out, counts = [], []
+    for r in results:
+        smoother.note_bodies(r, lambda _id: body, CAMERA)
+        done = smoother.add(r)
+        counts.append(len(done))
+        out += done
+    return out + smoother.finish(), counts
+
+
+def test_the_line_fit_keeps_straight_motion_to_the_ends_and_averages_noise_in_the_middle():
+    offsets = (np.arange(9) - 4) / 30.0
+    weights = np.exp(-0.5 * (offsets / SIGMA_S) ** 2)
+    poses = np.repeat(_upright()[None], 9, axis=0)
+    poses[:, 0] += 0.3 * offsets  # a straight walk, 0.3 m/s
+    poses[:, 10] += 2.0 * offsets  # an angle turning at 2 rad/s
+    assert np.allclose(local_linear_pose(poses, offsets, weights, 4), poses[4], atol=1e-12)
+    end = slice(0, 5)  # the last frame of a trajectory: only earlier ones, no lag
+    assert np.allclose(local_linear_pose(poses[end], offsets[end], weights[end], 4), poses[4], atol=1e-12)
+    noisy = poses.copy()
+    noisy[:, 12] += 0.1 * (-1.0) ** np.arange(9)  # jitter; balanced offsets: the weighted mean (hand: np.average)
+    assert local_linear_pose(noisy, offsets, weights, 4)[12] == pytest.approx(np.average(noisy[:, 12], weights=weights))
+
+
+def test_root_quaternions_of_either_sign_average_to_one_unit_rotation():
+    poses = np.stack([_turned(_upright(), a) for a in (-0.1, 0.0, 0.1)])
+    flipped = poses.copy()
+    flipped[0, ROOT_QUATERNION] *= -1  # the same rotation
+    offsets, weights = np.array([-1.0, 0.0, 1.0]) / 30, np.ones(3)
+    a, b = local_linear_pose(poses, offsets, weights, 1), local_linear_pose(flipped, offsets, weights, 1)
+    assert np.allclose(a, b) and np.linalg.norm(a[ROOT_QUATERNION]) == pytest.approx(1.0)
+    assert np.allclose(a[ROOT_QUATERNION], poses[1, ROOT_QUATERNION], atol=1e-12)
+
+
+def test_trajectories_are_cut_where_lost_restarted_or_turned_round():
+    p = _upright()
+    poses = [p, p, None, p, p, _turned(p, np.pi), p, _turned(p, 0.5)]
+    states = ["init", "tracking", "lost", "tracking", "init", "tracking", "tracking", "tracking"]
+    # lost at 2; restart at 4; half a turn at 5 (a corrected facing) and back at 6; 0.5 rad at 7 is motion
+    assert segment_starts(poses, states) == [0, 0, -1, 3, 4, 5, 6, 6]
+
+
+def test_results_come_in_order_three_sigma_late_with_the_found_pose_kept(body):
+    rng = np.random.default_rng(0)
+    truth = [_upright(x=0.01 * i) for i in range(20)]
+    for t in truth:
+        t[ANGLES] = ANGLE_LIMITS.mean(axis=1)  # still angles, in the middle of their ranges
+    found = [t.copy() for t in truth]
+    for f in found:
+        f[7:] += rng.normal(0.0, 0.05, POSE_DIM - 7)  # jitter of every angle
+    results = [_result(body, i, f) for i, f in enumerate(found)]
+    out, counts = _smooth(body, results)
+    assert [r.index for r in out] == list(range(20))
+    assert counts == [0] * 5 + [1] * 15  # 0.15 s late: frame i goes out with frame i + 5
+    for r, f in zip(out, results):
+        assert r.bodies[0].unfiltered is f.bodies[0]
+        # the joints are the body posed at the published pose (hand: the body's own forward kinematics)
+        assert np.allclose(r.bodies[0].joints3d, body.posed_points(r.bodies[0].pose[None], EVAL_JOINTS)[0], atol=1e-9)
+        assert np.allclose(r.bodies[0].joints2d, CAMERA.project(r.bodies[0].joints3d))
+    true_joints = body.posed_points(np.stack(truth), EVAL_JOINTS)
+
+    def error_mm(run):
+        return 1000 * np.mean([np.linalg.norm(r.bodies[0].joints3d - t, axis=1).mean()
+                               for r, t in zip(run, true_joints)])
+
+    assert error_mm(out) < 0.7 * error_mm(results), (error_mm(results), error_mm(out))
+
+
+def test_nothing_is_averaged_across_a_lost_frame_or_a_corrected_facing(body):
+    poses = [_upright(x=0.0)] * 6 + [None] + [_upright(x=0.5)] * 6 + [_turned(_upright(x=0.5), np.pi)] * 6
+    results = [_result(body, i, p, "lost" if p is None else "tracking") for i, p in enumerate(poses)]
+    out, _ = _smooth(body, results)
+    for r, p in zip(out, poses):
+        if p is None:
+            assert r.bodies[0].state == "lost" and r.bodies[0].pose is None
+        else:
+            assert np.allclose(r.bodies[0].pose, p, atol=1e-8)  # (a bound nudges an angle by 1e-10)
+
+
+def test_timestamps_that_do_not_advance_count_as_thirty_frames_a_second(body):
+    rng = np.random.default_rng(1)
+    poses = [_upright(x=rng.normal(0, 0.02)) for _ in range(12)]
+    stamped, _ = _smooth(body, [_result(body, i, p) for i, p in enumerate(poses)])
+    unstamped, _ = _smooth(body, [_result(body, i, p, stamp_ns=0) for i, p in enumerate(poses)])
+    assert all(np.allclose(a.bodies[0].pose, b.bodies[0].pose) for a, b in zip(stamped, unstamped))
+
+
+def test_a_body_with_no_known_body_model_and_a_failed_run_pass_unchanged(body):
+    smoother = CentredSmoother(SIGMA_S)
+    results = [_result(body, i, _upright(x=0.01 * (-1) ** i)) for i in range(8)]
+    out = []
+    for r in results:  # no note_bodies: the poses cannot be posed again, so they are left as found
+        out += smoother.add(r)
+    out += smoother.finish()
+    assert all(a is b for a, b in zip(out, results)) and len(out) == 8
+    smoother = CentredSmoother(SIGMA_S)
+    for r in results[:3]:
+        smoother.note_bodies(r, lambda _id: body, CAMERA)
+        assert smoother.add(r) == []
+    assert smoother.release() == results[:3]  # as found
+
+
+def test_a_sigma_of_zero_is_refused():
+    with pytest.raises(ValueError, match="above 0"):
+        CentredSmoother(0.0)
+
+
+@pytest.fixture(scope="module")
+def side_wave(tmp_path_factory) -> Path:
+    """20 frames of the built-in body waving, seen from the side."""
+    out = tmp_path_factory.mktemp("side_wave_smoothing")
+    assert main(["synth", "--motion", "builtin:wave", "--frames", "20", "--camera-yaw", "90", "--out", str(out),
+                 "--quiet"]) == 0
+    return out
+
+
+def test_a_tracked_run_publishes_the_smoothed_poses_of_the_same_track(side_wave, body):
+    settings = {"particles": 16, "generations": 12, "max_people": 1, "auto_height": False}
+    found = list(swarmpose.track(f"folder:{side_wave}", detector="simulated", **settings))
+    smoothed = list(swarmpose.track(f"folder:{side_wave}", detector="simulated", smoothing="centred", **settings))
+    assert [r.index for r in smoothed] == list(range(20))
+    assert all(r.timings_ms["smoothing"] > 0 for r in smoothed)  # its time, counted in a run's frames/s
+    # the search is the same: each published body keeps the unsmoothed run's fit as its found one
+    assert all(np.array_equal(s.bodies[0].found.pose, f.bodies[0].pose) for s, f in zip(smoothed, found))
+    # and what is published is the smoother's output over that run's results (the module's own unit tests
+    # check the smoother against hand computation)
+    tracking_body = body if len(body.triangles) <= TrackerConfig().triangles else body.tracking_lod(
+        TrackerConfig().triangles)
+    by_hand, _ = _smooth(tracking_body, [replace(r, bodies=(r.bodies[0],)) for r in found])
+    assert all(np.allclose(s.bodies[0].pose, h.bodies[0].pose, atol=1e-9) for s, h in zip(smoothed, by_hand))
+    gt = load_ground_truth(side_wave)
+
+    def error_mm(run):
+        return np.mean([1000 * np.linalg.norm(r.bodies[0].joints3d - gt.joints3d[gt.row(r.index)], axis=1).mean()
+                        for r in run])
+
+    assert error_mm(smoothed) <= error_mm(found) + 1.0, (error_mm(found), error_mm(smoothed))
+
+
+def test_live_commands_refuse_it_and_name_what_to_run(wave_sequence, tmp_path, capsys):
+    assert main(["replay", str(wave_sequence), "--out", str(tmp_path), "--smoothing", "centred", "-q"]) == 2
+    assert "swarmpose track" in capsys.readouterr().err
+    source = open_source(f"folder:{wave_sequence}")
+    with swarmpose.Tracker("builtin", "simulated", source=source, smoothing="centred") as tracker:
+        with pytest.raises(ConfigError, match="swarmpose.track"):
+            tracker.track_frame(next(iter(source)))
+    source.close()
+    assert TrackerConfig(backward=5, smoothing="centred").centred_sigma_s == SIGMA_S  # runs after the backward pass
