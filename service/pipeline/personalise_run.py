@@ -37,7 +37,8 @@ class Personalised:
 def collect_samples(config: ServiceConfig, space: ShapeSpace, frames: int,
                     show_progress: bool = True) -> tuple[list[ShapeSample], Intrinsics | None, int]:
     """Track the first ``frames`` frames of ``config.source`` (one person) with the start body
-    of ``space``: (the samples with a pose, the camera, the frames read)."""
+    of ``space``: (the samples with a pose, the camera, the frames read). The tracker's offline
+    settings apply to the samples' poses: the backward pass and the centred smoothing."""
     config.require_source()
     tracker_config = replace(config.tracker, triangles=space.triangles)  # the pipeline tracks one person
     body = space.tracking_body(space.start)
@@ -49,7 +50,8 @@ def collect_samples(config: ServiceConfig, space: ShapeSpace, frames: int,
         stack.callback(source.close)
         detector = make_detector(config.detector, source, config.models)
         stack.callback(detector.close)
-        pipeline = FramePipeline(detector, lambda k, body_id: BodyTracker(body, k, tracker_config, body_id=body_id))
+        pipeline = FramePipeline(detector, lambda k, body_id: BodyTracker(body, k, tracker_config, body_id=body_id),
+                                 backward=tracker_config.backward, centred_sigma_s=tracker_config.centred_sigma_s)
         frames_of: dict[int, Frame] = {}
         with progress_bar("personalise: track", frames or getattr(source, "length", None),
                           enabled=show_progress) as bar:

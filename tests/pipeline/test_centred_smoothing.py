@@ -209,3 +209,26 @@ def test_live_commands_refuse_it_and_name_what_to_run(wave_sequence, tmp_path, c
             tracker.track_frame(next(iter(source)))
     source.close()
     assert TrackerConfig(backward=5, smoothing="centred").centred_sigma_s == SIGMA_S  # runs after the backward pass
+
+
+def test_personalize_collects_its_samples_with_the_offline_settings(side_wave):
+    """``personalize --smoothing centred`` (and ``--backward N``) apply to the poses its fit starts
+    from: the samples' poses are those a smoothed run of the same start body publishes."""
+    from swarmpose.body.shape_space import shape_space_for
+    from swarmpose.pipeline.config import ServiceConfig
+    from swarmpose.pipeline.personalise_run import collect_samples
+
+    space = shape_space_for("builtin", None, TrackerConfig().triangles)
+    budget = {"particles": 16, "generations": 12}
+    poses = {}
+    for smoothing in ("off", "centred"):
+        config = ServiceConfig(source=f"folder:{side_wave}", detector="simulated", body="builtin",
+                               tracker=TrackerConfig(smoothing=smoothing, **budget))
+        samples, _, read = collect_samples(config, space, 20, show_progress=False)
+        assert read == 20 and len(samples) == 20
+        poses[smoothing] = np.stack([s.pose for s in samples])
+    published = np.stack([r.bodies[0].pose for r in swarmpose.track(
+        f"folder:{side_wave}", body=space.tracking_body(space.start), detector="simulated", smoothing="centred",
+        **budget)])
+    assert np.allclose(poses["centred"], published, atol=1e-9)
+    assert not np.allclose(poses["centred"], poses["off"])
