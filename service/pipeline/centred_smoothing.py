@@ -12,8 +12,9 @@ and a BVH agree. (Averaging the pose vectors alone was tried first: an arm whose
 between two ways of reaching about the same place averages to neither; on the 3-person crossing the
 female walker's error went 81.7 → 79.8 mm that way, 70.0 with the joints smoothed and 72.9 with the
 pose fitted to them. BENCHMARKS.md.) A person's trajectory is cut, and nothing is averaged across
-the cut, where the person is lost or missing, where a track (re)starts (state ``init``) and where
-the root turns by more than :data:`BREAK_TURN_RAD` in one frame (a corrected facing, not motion).
+the cut, where the person is lost or missing, where a track (re)starts (state ``init``), where
+the root turns by more than :data:`BREAK_TURN_RAD` in one frame (a corrected facing, not motion)
+and where the person's body changes (an automatic height or a ``--personalize`` shape locked).
 
 As with the One-Euro filter, only what is published is smoothed: the search always starts from
 its own last solution, and the result keeps it in ``unfiltered``. Results come 3σ late (0.15 s at
@@ -75,15 +76,18 @@ def local_linear_pose(poses: np.ndarray, offsets_s: np.ndarray, weights: np.ndar
     return out
 
 
-def segment_starts(poses: list[np.ndarray | None], states: list[str]) -> list[int]:
-    """Per frame of one person's trajectory (pose (36,) or None where lost or missing; state), the
-    index of the frame its segment starts at (-1 where there is no pose): a segment ends at a missing
-    pose, and a new one starts at a state ``init`` and after a root turn above :data:`BREAK_TURN_RAD`."""
+def segment_starts(poses: list[np.ndarray | None], states: list[str], bodies: list[object] | None = None) -> list[int]:
+    """Per frame of one person's trajectory (pose (36,) or None where lost or missing; state; the
+    body it was fitted with, any object compared by identity), the index of the frame its segment
+    starts at (-1 where there is no pose): a segment ends at a missing pose, and a new one starts at
+    a state ``init``, after a root turn above :data:`BREAK_TURN_RAD` and where the body changes (a
+    height or shape locked: its joints move with no motion)."""
+    bodies = bodies if bodies is not None else [None] * len(poses)
     starts, start = [], -1
     for k, (pose, state) in enumerate(zip(poses, states)):
         if pose is None:
             start = -1
-        elif start < 0 or state == "init" or quaternion_angle(
+        elif start < 0 or state == "init" or bodies[k] is not bodies[k - 1] or quaternion_angle(
                 pose[ROOT_QUATERNION], poses[k - 1][ROOT_QUATERNION]) > BREAK_TURN_RAD:
             start = k
         starts.append(start)
@@ -175,7 +179,8 @@ class CentredSmoother:
             return body
         mine = [next((b for b in r.bodies if b.id == body.id), None) for _, r in window]
         poses = [None if b is None or b.state == "lost" or b.pose is None else b.pose for b in mine]
-        starts = segment_starts(poses, [b.state if b is not None else "lost" for b in mine])
+        bodies = [self.fitted_with.get((r.index, body.id), (None,))[0] for _, r in window]
+        starts = segment_starts(poses, [b.state if b is not None else "lost" for b in mine], bodies)
         near = [j for j in range(len(window)) if starts[j] == starts[k] and abs(window[j][0] - time_s) <= self.span_s]
         if len(near) < 2:
             return body

@@ -101,6 +101,8 @@ def test_trajectories_are_cut_where_lost_restarted_or_turned_round():
     states = ["init", "tracking", "lost", "tracking", "init", "tracking", "tracking", "tracking"]
     # lost at 2; restart at 4; half a turn at 5 (a corrected facing) and back at 6; 0.5 rad at 7 is motion
     assert segment_starts(poses, states) == [0, 0, -1, 3, 4, 5, 6, 6]
+    short, tall = object(), object()  # a height locked at frame 2: the joints jump with no motion
+    assert segment_starts([p] * 4, ["tracking"] * 4, [short, short, tall, tall]) == [0, 0, 2, 2]
 
 
 def test_results_come_in_order_three_sigma_late_with_the_found_pose_kept(body):
@@ -138,6 +140,18 @@ def test_nothing_is_averaged_across_a_lost_frame_or_a_corrected_facing(body):
             assert r.bodies[0].state == "lost" and r.bodies[0].pose is None
         else:
             assert np.allclose(r.bodies[0].pose, p, atol=1e-8)  # (a bound nudges an angle by 1e-10)
+
+
+def test_nothing_is_averaged_across_a_change_of_body(body):
+    scaled = load_body("builtin", "height=1.9")  # another body object: a height locked at frame 6
+    poses = [_upright(x=0.0)] * 6 + [_upright(x=0.2)] * 6
+    results = [_result(body if i < 6 else scaled, i, p) for i, p in enumerate(poses)]
+    smoother, out = CentredSmoother(SIGMA_S), []
+    for r in results:
+        smoother.note_bodies(r, lambda _id, i=r.index: body if i < 6 else scaled, CAMERA)
+        out += smoother.add(r)
+    out += smoother.finish()
+    assert all(np.allclose(r.bodies[0].pose, p, atol=1e-8) for r, p in zip(out, poses))
 
 
 def test_timestamps_that_do_not_advance_count_as_thirty_frames_a_second(body):
