@@ -147,7 +147,7 @@ def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
                         "last solution (0: off, the tracker's default; N >= --frames: the whole sequence)")
     p.add_argument("--smoothing", choices=("off", "centred"), default="off",
                    help="centred: each published pose smoothed with the frames either side (the recordings' "
-                        "smoothing, --smoothing-sigma-s 0.05 s; off: the tracker's default)")
+                        "smoothing at its default sigma, 0.05 s; off: the tracker's default)")
     p.add_argument("--polish", type=non_negative_int, default=60, metavar="N",
                    help="N rounds of the local polish after each frame's search, hybrid mode only (60: the tracker's "
                         "default; 0: off)")

@@ -88,6 +88,9 @@ class BackwardPass:
         self.window, self.stop = int(window), stop
         self.results: list[FrameResult] = []
         self.steps: list[StepInput] = []
+        self.refit_bodies: dict[tuple[int, int], SkinnedBody] = {}
+        """The body each fit of the last window handed on was refit with, by (frame index, id) (the
+        window's last step's body, which a height or shape locked in the window changes)."""
         self._tracker: BodyTracker | None = None  # the backward tracker, rebuilt for another camera or settings
 
     def record(self, tracker: BodyTracker, frame: Frame, joints: Joints2D | None, others_removed: bool) -> None:
@@ -112,6 +115,7 @@ class BackwardPass:
     def flush(self) -> list[FrameResult]:
         """Refit the held frames backwards per person and hand them on, in order."""
         refit: dict[tuple[int, int], BodyResult] = {}
+        self.refit_bodies = {}
         spent_ms: dict[int, float] = {}
         held = {r.index: r for r in self.results}
         for body_id, steps in person_steps(self.steps, self.results).items():
@@ -159,6 +163,7 @@ class BackwardPass:
             if body.state != "lost":
                 refit[(index, body_id)] = replace(body, reason=forward[index].reason if index in forward
                                                   else body.reason)
+                self.refit_bodies[(index, body_id)] = tracker.body
         return refit
 
     def _tracker_for(self, step: StepInput) -> BodyTracker:

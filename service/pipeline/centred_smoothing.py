@@ -15,6 +15,8 @@ pose fitted to them. BENCHMARKS.md.) A person's trajectory is cut, and nothing i
 the cut, where the person is lost or missing, where a track (re)starts (state ``init``), where
 the root turns by more than :data:`BREAK_TURN_RAD` in one frame (a corrected facing, not motion)
 and where the person's body changes (an automatic height or a ``--personalize`` shape locked).
+After the backward pass, a refit frame is fitted with the body the backward pass refit it with.
+A body whose smoothing fails (logged) is published as found.
 
 As with the One-Euro filter, only what is published is smoothed: the search always starts from
 its own last solution, and the result keeps it in ``unfiltered``. Results come 3σ late (0.15 s at
@@ -25,6 +27,7 @@ frames are taken to be 1/30 s apart.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -37,6 +40,8 @@ from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.tracking.one_euro import DEFAULT_DT_S
 from swarmpose.tracking.result import BodyResult, FrameResult
+
+log = logging.getLogger(__name__)
 
 SIGMA_SPAN = 3.0
 """A pose is averaged with the poses within this many σ of it in time."""
@@ -118,6 +123,12 @@ class CentredSmoother:
             if skinned is not None and intrinsics is not None:
                 self.fitted_with[(result.index, body.id)] = (skinned, intrinsics)
 
+    def note_refits(self, bodies: dict[tuple[int, int], SkinnedBody], intrinsics: Intrinsics | None) -> None:
+        """Keep the bodies the backward pass refit frames with, by (frame index, id), in place of
+        those :meth:`note_bodies` kept for them."""
+        if intrinsics is not None:
+            self.fitted_with.update({key: (body, intrinsics) for key, body in bodies.items()})
+
     def add(self, result: FrameResult) -> list[FrameResult]:
         """Hold ``result``; the held results now ``SIGMA_SPAN`` σ older than it, smoothed."""
         self.held.append((self._time_s(result), result))
@@ -189,10 +200,15 @@ class CentredSmoother:
         start = local_linear_pose(np.stack([poses[j] for j in near]), offsets, weights, near.index(k))
         joints = local_linear(np.stack([mine[j].joints3d.ravel() for j in near]), offsets, weights).reshape(-1, 3)
         skinned, intrinsics = fitted
-        found = skinned.posed_points(body.pose[None], EVAL_JOINTS)[0]
-        # the body's own points moved as the published joints are (a tracker's body may differ from the
-        # one body_of gave a moment later: a locked height), then the pose whose points reach them
-        pose = (fit_pose_to_points(skinned, start, EVAL_JOINTS, found + joints - body.joints3d)
-                if np.all(np.isfinite(joints)) else start)
-        joints3d = body.joints3d + skinned.posed_points(pose[None], EVAL_JOINTS)[0] - found
+        try:
+            found = skinned.posed_points(body.pose[None], EVAL_JOINTS)[0]
+            # the body's own points moved as the published joints are (a tracker's body may differ from
+            # the one body_of gave a moment later: a locked height), then the pose whose points reach them
+            pose = (fit_pose_to_points(skinned, start, EVAL_JOINTS, found + joints - body.joints3d)
+                    if np.all(np.isfinite(joints)) else start)
+            joints3d = body.joints3d + skinned.posed_points(pose[None], EVAL_JOINTS)[0] - found
+        except Exception as exc:  # that body is published as found; the run goes on
+            log.warning("centred smoothing of person %d at frame %d failed (%s: %s); published as found",
+                        body.id, index, type(exc).__name__, exc)
+            return body
         return replace(body, pose=pose, joints3d=joints3d, joints2d=intrinsics.project(joints3d), unfiltered=body)

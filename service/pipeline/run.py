@@ -83,7 +83,11 @@ def results(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline, fra
     seconds: dict[int, float] = {}  # each result's forward time until it is counted
 
     def smoothed(done: list[FrameResult]) -> list[FrameResult]:
-        return done if smoother is None else [out for result in done for out in smoother.add(result)]
+        if smoother is None:
+            return done
+        if refiner is not None:  # the bodies the backward pass refit these with
+            smoother.note_refits(refiner.refit_bodies, pipeline.intrinsics)
+        return [out for result in done for out in smoother.add(result)]
 
     items, read = iter(source), 0
     try:

@@ -83,13 +83,13 @@ class TrackerConfig:
     auto_height: bool = setting(True, "a body whose shape is not given (no --shape, not a .glb) is scaled to each "
                                       "person's height, measured on the depth of their first upright frames")
     smoothing: str = setting("off", "smooth the published poses: off (as in evaluation), one-euro (a One-Euro "
-                                    "filter, live) or centred (recordings only: each pose read off a straight line "
-                                    "fitted, Gaussian-weighted, through the person's poses within 3 sigma either "
-                                    "side; published 3 sigma late); the search always starts from the unsmoothed "
-                                    "pose",
+                                    "filter, live) or centred (recordings only: each joint read off a straight line "
+                                    "fitted, Gaussian-weighted, through the person's positions of it within 3 "
+                                    "sigma either side, the pose fitted to those joints; published 3 sigma late); "
+                                    "the search always starts from the unsmoothed pose",
                              choices=SMOOTHING)
     smoothing_sigma_s: float = setting(0.05, "centred: the Gaussian's sigma in time, s (larger: steadier, "
-                                             "fast motion flattened)", minimum=0.001)
+                                             "fast motion flattened)", minimum=0.001, maximum=1.0)
     smoothing_cutoff_hz: float = setting(4.0, "One-Euro: the cut-off at rest, Hz (lower: steadier, more lag)",
                                          minimum=0.01)
     smoothing_beta: float = setting(10.0, "One-Euro: how fast the cut-off rises with speed, s per m or rad (higher: "
@@ -114,6 +114,9 @@ class TrackerConfig:
             raise ConfigError(f"backward = {self.backward} with smoothing {self.smoothing}: the backward pass "
                               "publishes its own fits, which the filter would have to run over backwards; choose "
                               "one (smoothing off or centred, or backward 0)")
+        if self.smoothing == "centred" and self.mode == "lift":
+            raise ConfigError("smoothing centred fits the body's pose to the smoothed joints; the lift mode fits "
+                              "no body (use hybrid, depth or joints, or smoothing off)")
         if 0 < self.personalize < 3:
             raise ConfigError(f"personalize = {self.personalize}: a shape needs at least 3 tracked frames "
                               "(0 turns personalisation off)")

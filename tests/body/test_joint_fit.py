@@ -51,3 +51,11 @@ def test_targets_of_the_wrong_shape_or_not_finite_are_refused(body):
     targets[0, 0] = np.nan
     with pytest.raises(ValueError, match="finite"):
         fit_pose_to_points(body, neutral_pose(), EVAL_JOINTS, targets)
+
+
+def test_a_start_beyond_its_limits_is_kept_where_it_is_already_right(body):
+    start = neutral_pose()
+    start[ANGLES][0] = ANGLE_LIMITS[0, 1] + 0.3  # a pose given from elsewhere, past a limit
+    targets = body.posed_points(start[None], EVAL_JOINTS)[0]
+    fit = fit_pose_to_points(body, start, EVAL_JOINTS, targets)
+    assert fit[ANGLES][0] == pytest.approx(start[ANGLES][0], abs=1e-6)

@@ -246,3 +246,73 @@ def test_personalize_collects_its_samples_with_the_offline_settings(side_wave):
         **budget)])
     assert np.allclose(poses["centred"], published, atol=1e-9)
     assert not np.allclose(poses["centred"], poses["off"])
+
+
+def test_the_lift_mode_has_no_pose_to_smooth_and_refuses_it():
+    with pytest.raises(ConfigError, match="lift mode fits no body"):
+        TrackerConfig(mode="lift", smoothing="centred")
+
+
+def test_after_the_backward_pass_each_frame_is_fitted_with_the_body_it_was_refit_with(tmp_path):
+    """A 1.9 m person: the automatic height locks a body scaled to them in the middle of the window, and
+    the backward pass refits the whole window with it, so every published pose, smoothed, is that
+    body's (its joints are the scaled body posed at the published pose)."""
+    from swarmpose.pipeline.run import results
+
+    assert main(["synth", "--shape", "height=1.9", "--motion", "builtin:wave", "--frames", "20", "--camera-yaw", "90",
+                 "--out", str(tmp_path), "--quiet"]) == 0
+    source = open_source(f"folder:{tmp_path}")
+    with swarmpose.Tracker("builtin", "simulated", source=source, backward=20, smoothing="centred",
+                           particles=16, generations=12, max_people=1) as tracker:
+        run = list(results(source, tracker.pipeline))
+        final = tracker.pipeline.body_of(0)
+        start = tracker.body
+    source.close()
+    assert [r.index for r in run] == list(range(20))
+    assert np.ptp(final.vertices[:, 1]) > 1.05 * np.ptp(start.vertices[:, 1])  # locked, scaled to the person
+    for r in run:
+        b = r.bodies[0]
+        assert np.allclose(b.joints3d, final.posed_points(b.pose[None], EVAL_JOINTS)[0], atol=1e-6), r.index
+
+
+def test_a_source_that_breaks_hands_on_the_frames_held_as_found_then_raises(wave_sequence):
+    from swarmpose.detect.registry import make_detector
+    from swarmpose.pipeline.run import RunSummary, results
+    from swarmpose.pipeline.step import FramePipeline
+    from swarmpose.tracking.body_tracker import BodyTracker
+
+    source = open_source(f"folder:{wave_sequence}")
+
+    def breaking():
+        for item in source:
+            if item.index == 3:
+                raise OSError("the recording is truncated")
+            yield item
+
+    config = TrackerConfig(particles=12, generations=8, max_people=1, smoothing="centred")
+    pipeline = FramePipeline(make_detector("simulated", source),
+                             lambda intr, body_id: BodyTracker(load_body("builtin"), intr, config, body_id=body_id),
+                             centred_sigma_s=config.centred_sigma_s)
+    got, summary = [], RunSummary()
+    with pytest.raises(OSError, match="truncated"):
+        for result in results(breaking(), pipeline, summary=summary):
+            got.append(result)
+    source.close()
+    assert [r.index for r in got] == [0, 1, 2] and summary.frames == 3
+    assert all(r.bodies[0].unfiltered is None for r in got)  # as found: three frames are not 3 sigma
+
+
+def test_with_several_people_each_id_is_smoothed_on_its_own_track(tmp_path):
+    from conftest import synthesize_scene
+
+    folder = synthesize_scene(tmp_path / "two", ("builtin:male:builtin:walk@-0.7,0.3",
+                                                  "builtin:female:builtin:wave@0.6,-0.6"), 8, seed=3)
+    settings = {"particles": 16, "generations": 12, "max_people": 3, "auto_height": False}
+    found = list(swarmpose.track(f"folder:{folder}", detector="simulated", **settings))
+    smoothed = list(swarmpose.track(f"folder:{folder}", detector="simulated", smoothing="centred", **settings))
+    assert [[b.id for b in r.bodies] for r in smoothed] == [[b.id for b in r.bodies] for r in found]
+    pairs = [(s, f) for rs, rf in zip(smoothed, found) for s, f in zip(rs.bodies, rf.bodies) if f.pose is not None]
+    assert pairs and all(np.array_equal(s.found.pose, f.pose) for s, f in pairs)
+    assert sum(s.unfiltered is not None for s, _ in pairs) >= len(pairs) - 2  # each person smoothed
+    for s, f in pairs:  # a person's smoothing moves their joints by steps' worth, never to the other person
+        assert np.linalg.norm(s.joints3d - f.joints3d, axis=1).max() < 0.3
