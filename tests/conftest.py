@@ -57,6 +57,17 @@ def wave_sequence(tmp_path_factory) -> Path:
     return out
 
 
+@pytest.fixture(scope="session")
+def side_wave(tmp_path_factory) -> Path:
+    """20 frames of the built-in body waving, seen from the side (the start's far arm settles late)."""
+    from swarmpose.cli.main import main
+
+    out = tmp_path_factory.mktemp("side_wave")
+    assert main(["synth", "--motion", "builtin:wave", "--frames", "20", "--camera-yaw", "90", "--out", str(out),
+                 "--quiet"]) == 0
+    return out
+
+
 def free_port() -> int:
     """A TCP port on 127.0.0.1 nobody listens on right now."""
     from swarmpose.cli.demo import free_local_port

@@ -31,15 +31,6 @@ from swarmpose.tracking.result import BodyResult, FrameResult
 SMALL = {"particles": 24, "generations": 24, "max_people": 1, "auto_height": False}
 
 
-@pytest.fixture(scope="module")
-def side_wave(tmp_path_factory) -> Path:
-    """20 frames of the built-in body waving, seen from the side (the start's far arm settles late)."""
-    out = tmp_path_factory.mktemp("side_wave")
-    assert main(["synth", "--motion", "builtin:wave", "--frames", "20", "--camera-yaw", "90", "--out", str(out),
-                 "--quiet"]) == 0
-    return out
-
-
 def _errors_mm(folder: Path, run) -> np.ndarray:
     """Per frame, the mean 3D joint error (mm) of the first body against the ground truth."""
     gt = load_ground_truth(folder)
@@ -133,7 +124,11 @@ def test_a_stopped_run_hands_on_the_frames_it_held(wave_sequence):
     assert all("backward" not in m["timings_ms"] for m in got)  # promptly: with their forward fits
 
 
-def test_a_source_that_breaks_hands_on_the_frames_held_then_raises(wave_sequence):
+@pytest.mark.parametrize("offline", [{"backward": 10}, {"smoothing": "centred"},
+                                     {"backward": 10, "smoothing": "centred"}])
+def test_a_source_that_breaks_hands_on_the_frames_held_as_found_then_raises(wave_sequence, offline):
+    """The backward pass and the centred smoothing (``test_centred_smoothing.py``) hold frames; a source
+    that breaks gets them handed on as the forward pass found them, then its error."""
     source = open_source(f"folder:{wave_sequence}")
 
     def breaking():
@@ -142,16 +137,17 @@ def test_a_source_that_breaks_hands_on_the_frames_held_then_raises(wave_sequence
                 raise OSError("the recording is truncated")
             yield item
 
-    config = TrackerConfig(particles=12, generations=8, max_people=1, backward=10)
+    config = TrackerConfig(particles=12, generations=8, max_people=1, **offline)
     pipeline = FramePipeline(make_detector("simulated", source),
                              lambda intr, body_id: BodyTracker(load_body("builtin"), intr, config, body_id=body_id),
-                             backward=config.backward)
+                             backward=config.backward, centred_sigma_s=config.centred_sigma_s)
     got, summary = [], RunSummary()
     with pytest.raises(OSError, match="truncated"):
         for result in results(breaking(), pipeline, summary=summary):
-            got.append(result.index)
+            got.append(result)
     source.close()
-    assert got == [0, 1, 2] and summary.frames == 3
+    assert [r.index for r in got] == [0, 1, 2] and summary.frames == 3
+    assert all("backward" not in r.timings_ms and r.bodies[0].unfiltered is None for r in got)
 
 
 @pytest.mark.parametrize("settings, words", [

@@ -4,7 +4,6 @@ are cut, when results come, and a tracked run's published poses against its foun
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -182,15 +181,6 @@ def test_a_sigma_of_zero_is_refused():
         CentredSmoother(0.0)
 
 
-@pytest.fixture(scope="module")
-def side_wave(tmp_path_factory) -> Path:
-    """20 frames of the built-in body waving, seen from the side."""
-    out = tmp_path_factory.mktemp("side_wave_smoothing")
-    assert main(["synth", "--motion", "builtin:wave", "--frames", "20", "--camera-yaw", "90", "--out", str(out),
-                 "--quiet"]) == 0
-    return out
-
-
 def test_a_tracked_run_publishes_the_smoothed_poses_of_the_same_track(side_wave, body):
     settings = {"particles": 16, "generations": 12, "max_people": 1, "auto_height": False}
     found = list(swarmpose.track(f"folder:{side_wave}", detector="simulated", **settings))
@@ -273,33 +263,6 @@ def test_after_the_backward_pass_each_frame_is_fitted_with_the_body_it_was_refit
     for r in run:
         b = r.bodies[0]
         assert np.allclose(b.joints3d, final.posed_points(b.pose[None], EVAL_JOINTS)[0], atol=1e-6), r.index
-
-
-def test_a_source_that_breaks_hands_on_the_frames_held_as_found_then_raises(wave_sequence):
-    from swarmpose.detect.registry import make_detector
-    from swarmpose.pipeline.run import RunSummary, results
-    from swarmpose.pipeline.step import FramePipeline
-    from swarmpose.tracking.body_tracker import BodyTracker
-
-    source = open_source(f"folder:{wave_sequence}")
-
-    def breaking():
-        for item in source:
-            if item.index == 3:
-                raise OSError("the recording is truncated")
-            yield item
-
-    config = TrackerConfig(particles=12, generations=8, max_people=1, smoothing="centred")
-    pipeline = FramePipeline(make_detector("simulated", source),
-                             lambda intr, body_id: BodyTracker(load_body("builtin"), intr, config, body_id=body_id),
-                             centred_sigma_s=config.centred_sigma_s)
-    got, summary = [], RunSummary()
-    with pytest.raises(OSError, match="truncated"):
-        for result in results(breaking(), pipeline, summary=summary):
-            got.append(result)
-    source.close()
-    assert [r.index for r in got] == [0, 1, 2] and summary.frames == 3
-    assert all(r.bodies[0].unfiltered is None for r in got)  # as found: three frames are not 3 sigma
 
 
 def test_with_several_people_each_id_is_smoothed_on_its_own_track(tmp_path):
