@@ -14,7 +14,7 @@ between two ways of reaching about the same place averages to neither; on the 3-
 female walker's error went 81.7 → 79.8 mm that way, 70.0 with the joints smoothed and 72.9 with the
 pose fitted to them. BENCHMARKS.md.) A person's trajectory is cut, and nothing is averaged across
 the cut, where the person is lost or missing, where a track (re)starts (state ``init``), where
-the root turns by more than :data:`BREAK_TURN_RAD` in one frame (a corrected facing, not motion)
+the root turns by more than :data:`BREAK_TURN_DEG` in one frame (a corrected facing, not motion)
 and where the person's body changes (an automatic height or a ``--personalize`` shape locked).
 After the backward pass, a refit frame is fitted with the body the backward pass refit it with.
 A body whose smoothing fails (logged) is published as found.
@@ -29,6 +29,7 @@ frames are taken to be 1/30 s apart.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -36,6 +37,7 @@ from dataclasses import replace
 import numpy as np
 
 from swarmpose.body.joint_fit import fit_pose_to_points
+from swarmpose.body.kinematics import root_turn_deg
 from swarmpose.body.skeleton import EVAL_JOINTS, ROOT_QUATERNION
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
@@ -51,13 +53,8 @@ CONFIDENCE_FLOOR = 0.05
 joint the detector and the depth agreed on counts more than one they did not (the 3-person crossing's
 found runs re-smoothed: per-person Δ 54.4 / 66.8 / 34.6 → 52.6 / 64.5 / 32.8 mm, BENCHMARKS.md), and a
 joint with no confidence anywhere in the window is still smoothed."""
-BREAK_TURN_RAD = 1.0
-"""A root rotation between two consecutive frames larger than this (rad) cuts the trajectory."""
-
-
-def quaternion_angle(a: np.ndarray, b: np.ndarray) -> float:
-    """The rotation angle (rad) between unit quaternions a and b (4,)."""
-    return float(2.0 * np.arccos(min(1.0, abs(float(np.dot(a, b))))))
+BREAK_TURN_DEG = math.degrees(1.0)
+"""A root rotation between two consecutive frames larger than this (degrees: 1 rad) cuts the trajectory."""
 
 
 def local_linear(values: np.ndarray, offsets_s: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -91,15 +88,15 @@ def segment_starts(poses: list[np.ndarray | None], states: list[str], bodies: li
     """Per frame of one person's trajectory (pose (36,) or None where lost or missing; state; the
     body it was fitted with, any object compared by identity), the index of the frame its segment
     starts at (-1 where there is no pose): a segment ends at a missing pose, and a new one starts at
-    a state ``init``, after a root turn above :data:`BREAK_TURN_RAD` and where the body changes (a
+    a state ``init``, after a root turn above :data:`BREAK_TURN_DEG` and where the body changes (a
     height or shape locked: its joints move with no motion)."""
     bodies = bodies if bodies is not None else [None] * len(poses)
     starts, start = [], -1
     for k, (pose, state) in enumerate(zip(poses, states)):
         if pose is None:
             start = -1
-        elif start < 0 or state == "init" or bodies[k] is not bodies[k - 1] or quaternion_angle(
-                pose[ROOT_QUATERNION], poses[k - 1][ROOT_QUATERNION]) > BREAK_TURN_RAD:
+        elif (start < 0 or state == "init" or bodies[k] is not bodies[k - 1]
+              or root_turn_deg(poses[k - 1], pose) > BREAK_TURN_DEG):
             start = k
         starts.append(start)
     return starts

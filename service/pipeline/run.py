@@ -85,7 +85,7 @@ def results(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline, fra
     def smoothed(done: list[FrameResult]) -> list[FrameResult]:
         if smoother is None:
             return done
-        if refiner is not None:  # the bodies the backward pass refit these with
+        if refiner is not None and done:  # a window just refit: the bodies the backward pass used
             smoother.note_refits(refiner.refit_bodies, pipeline.intrinsics)
         return [out for result in done for out in smoother.add(result)]
 
