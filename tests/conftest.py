@@ -87,6 +87,29 @@ def synthesize_scene(out: Path, specs: tuple[str, ...], frames: int, seed: int, 
     return out
 
 
+TWO_PEOPLE = ("builtin:male:builtin:walk@-0.7,0.3", "builtin:female:builtin:wave@0.6,-0.6")
+"""A walker and a waver of the built-in body, apart (the offline passes' several-people tests)."""
+
+
+@pytest.fixture(scope="session")
+def two_people(tmp_path_factory) -> Path:
+    """8 frames of :data:`TWO_PEOPLE` (seed 3)."""
+    return synthesize_scene(tmp_path_factory.mktemp("two"), TWO_PEOPLE, 8, seed=3)
+
+
+def people_scores(folder: Path, run) -> dict:
+    """:func:`~swarmpose.sim.people_metrics.score_people` of a run's results against ``folder``'s
+    ground truth (the bodies not lost)."""
+    from swarmpose.sim.people_metrics import TruePerson, score_people
+    from swarmpose.sources.groundtruth import load_ground_truth
+
+    gt = load_ground_truth(folder)
+    frames = {r.index for r in run}
+    truth = {f: [TruePerson(p.id, p.joints3d, p.visible) for p in gt.people[gt.row(f)]] for f in gt.frames
+             if f in frames}
+    return score_people(truth, {r.index: {b.id: b.joints3d for b in r.bodies if b.state != "lost"} for r in run})
+
+
 class ValidatingSink:
     """A worker sink that keeps every frame and status message, each validated against its
     schema (a message that fails raises, and the worker then drops the sink: the test sees the

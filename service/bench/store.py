@@ -10,7 +10,7 @@ from pathlib import Path
 
 TRACKER_DEFAULTS = {"particles": 64, "generations": 64, "max_people": 1, "arm_prior": 0.0, "limb_flips": True,
                     "hidden_lifts": True, "arm_proposals": True, "hypotheses": 2, "backward": 0, "polish": 60,
-                    "smoothing": "off"}
+                    "smoothing": "off", "ensemble": 1}
 """The tracker settings every record stores, so that a resume compares them even when the
 caller left them at their defaults (``bench utdmhad`` adds ``auto_height``, which the matrix's
 given shapes never use)."""
@@ -29,7 +29,7 @@ def tracker_settings(tracker: dict | None) -> dict:
 def mode_settings(tracker: dict, mode: str) -> dict:
     """The settings a ``mode``'s record is made and resumed with: ``arm_proposals`` off where it does
     nothing (the joints and lift modes have no depth term to judge them), ``hypotheses`` and
-    ``backward`` 0 and ``smoothing`` off in the lift mode (no search, no body, no pose), so that
+    ``backward`` 0, ``ensemble`` 1 and ``smoothing`` off in the lift mode (no search, no body, no pose), so that
     their records made before the setting existed still match; ``polish`` only in the hybrid mode:
     the joints-only, depth-only and lift modes are the benchmarks' baselines (the paper's Table 3),
     run as every earlier figure ran them (the polish would take a joints-only baseline further too:
@@ -37,6 +37,7 @@ def mode_settings(tracker: dict, mode: str) -> dict:
     0.55)."""
     searched = {k: 0 if mode == "lift" else int(tracker.get(k, TRACKER_DEFAULTS[k]))
                 for k in ("hypotheses", "backward")}
+    searched["ensemble"] = 1 if mode == "lift" else int(tracker.get("ensemble", TRACKER_DEFAULTS["ensemble"]))
     polish = int(tracker.get("polish", TRACKER_DEFAULTS["polish"])) if mode == "hybrid" else 0
     smoothing = "off" if mode == "lift" else tracker.get("smoothing", TRACKER_DEFAULTS["smoothing"])
     return {**tracker, "arm_proposals": bool(tracker.get("arm_proposals", True)) and mode not in ("joints", "lift"),

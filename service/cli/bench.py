@@ -126,8 +126,9 @@ def _add_assets(p: argparse.ArgumentParser) -> None:
 
 
 def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
-    """--arm-prior, --limb-flips, --hidden-lifts, --arm-proposals, --hypotheses, --backward, --smoothing and
-    --polish of the resumable tracking benchmarks (a record keeps them, so a resume with other values tracks again)."""
+    """--arm-prior, --limb-flips, --hidden-lifts, --arm-proposals, --hypotheses, --backward, --smoothing,
+    --ensemble and --polish of the resumable tracking benchmarks (a record keeps them, so a resume with other
+    values tracks again)."""
     p.add_argument("--arm-prior", type=non_negative_float, default=0.0,
                    help="the tracker's w_A (cost per rad² of the arms away from rest, times how side on the "
                         "person stands; 0 = off, the tracker's default)")
@@ -148,6 +149,9 @@ def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
     p.add_argument("--smoothing", choices=("off", "centred"), default="off",
                    help="centred: each published pose smoothed with the frames either side (the recordings' "
                         "smoothing at its default sigma, 0.05 s; off: the tracker's default)")
+    p.add_argument("--ensemble", type=positive_int, default=1, metavar="N",
+                   help="each sequence tracked N times with PSO seeds seed .. seed + N - 1, the joints averaged "
+                        "(1: off, the tracker's default; not with --backward; the lift mode tracks once)")
     p.add_argument("--polish", type=non_negative_int, default=60, metavar="N",
                    help="N rounds of the local polish after each frame's search, hybrid mode only (60: the tracker's "
                         "default; 0: off)")
@@ -156,7 +160,7 @@ def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
 def _tracker_switches(args: argparse.Namespace) -> dict:
     """The values of :func:`_add_tracker_switches`' options, by their tracker setting's name."""
     names = ("arm_prior", "limb_flips", "hidden_lifts", "arm_proposals", "hypotheses", "backward", "smoothing",
-             "polish")
+             "ensemble", "polish")
     return {name: getattr(args, name) for name in names}
 
 

@@ -12,6 +12,7 @@ any source URI. Both run the same per-frame step as the command line.
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -23,6 +24,7 @@ from swarmpose.core.errors import ConfigError, ShapeError
 from swarmpose.core.settings import with_settings
 from swarmpose.detect.joints import Detector
 from swarmpose.detect.registry import make_detector
+from swarmpose.pipeline.ensemble import ensemble_of
 from swarmpose.pipeline.run import results, source_error
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
@@ -83,10 +85,13 @@ class Tracker:
         self.intrinsics = intrinsics
         tracker = (HeightFittingTracker if isinstance(body, str) and applies(body, shape or "", self.config)
                    else BodyTracker)
-        self.pipeline = FramePipeline(
-            self.detector, lambda intr, body_id: tracker(self.body, intr, self.config, body_id=body_id),
-            self.config.max_people, self.config.retire_frames, backward=self.config.backward,
-            centred_sigma_s=self.config.centred_sigma_s)
+        def pipeline(seed: int) -> FramePipeline:  # one track of every person (an ensemble's member: its seed)
+            settings = replace(self.config, seed=seed)
+            return FramePipeline(
+                self.detector, lambda intr, body_id: tracker(self.body, intr, settings, body_id=body_id),
+                settings.max_people, settings.retire_frames, backward=settings.backward,
+                centred_sigma_s=settings.centred_sigma_s)
+        self.pipeline = ensemble_of(pipeline, self.config.seed, self.config.ensemble)
         self._next_index = 0
         self._closed = False
 

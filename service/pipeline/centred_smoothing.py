@@ -36,11 +36,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from swarmpose.body.joint_fit import fit_pose_to_points
 from swarmpose.body.kinematics import root_turn_deg
-from swarmpose.body.skeleton import EVAL_JOINTS, ROOT_QUATERNION
+from swarmpose.body.skeleton import ROOT_QUATERNION
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
+from swarmpose.pipeline.pose_to_joints import body_at_joints
 from swarmpose.tracking.one_euro import DEFAULT_DT_S
 from swarmpose.tracking.result import BodyResult, FrameResult
 
@@ -207,14 +207,8 @@ class CentredSmoother:
                            for q in range(positions.shape[1])])
         skinned, intrinsics = fitted
         try:
-            found = skinned.posed_points(body.pose[None], EVAL_JOINTS)[0]
-            # the body's own points moved as the published joints are (a tracker's body may differ from
-            # the one body_of gave a moment later: a locked height), then the pose whose points reach them
-            pose = (fit_pose_to_points(skinned, start, EVAL_JOINTS, found + joints - body.joints3d)
-                    if np.all(np.isfinite(joints)) else start)
-            joints3d = body.joints3d + skinned.posed_points(pose[None], EVAL_JOINTS)[0] - found
+            return body_at_joints(body, skinned, intrinsics, start, joints)
         except Exception as exc:  # that body is published as found; the run goes on
             log.warning("centred smoothing of person %d at frame %d failed (%s: %s); published as found",
                         body.id, index, type(exc).__name__, exc)
             return body
-        return replace(body, pose=pose, joints3d=joints3d, joints2d=intrinsics.project(joints3d), unfiltered=body)

@@ -13,6 +13,7 @@ from swarmpose.core.errors import PersonalisationError
 from swarmpose.core.progress import progress_bar
 from swarmpose.detect.registry import make_detector
 from swarmpose.pipeline.config import ServiceConfig
+from swarmpose.pipeline.ensemble import ensemble_of
 from swarmpose.pipeline.run import remember_frames, results
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.sources.base import Frame
@@ -38,7 +39,7 @@ def collect_samples(config: ServiceConfig, space: ShapeSpace, frames: int,
                     show_progress: bool = True) -> tuple[list[ShapeSample], Intrinsics | None, int]:
     """Track the first ``frames`` frames of ``config.source`` (one person) with the start body
     of ``space``: (the samples with a pose, the camera, the frames read). The tracker's offline
-    settings apply to the samples' poses: the backward pass and the centred smoothing."""
+    settings apply to the samples' poses: the backward pass, the centred smoothing and the ensemble."""
     config.require_source()
     tracker_config = replace(config.tracker, triangles=space.triangles)  # the pipeline tracks one person
     body = space.tracking_body(space.start)
@@ -50,8 +51,11 @@ def collect_samples(config: ServiceConfig, space: ShapeSpace, frames: int,
         stack.callback(source.close)
         detector = make_detector(config.detector, source, config.models)
         stack.callback(detector.close)
-        pipeline = FramePipeline(detector, lambda k, body_id: BodyTracker(body, k, tracker_config, body_id=body_id),
-                                 backward=tracker_config.backward, centred_sigma_s=tracker_config.centred_sigma_s)
+        def member(seed: int) -> FramePipeline:  # one track (an ensemble's member: its seed)
+            settings = replace(tracker_config, seed=seed)
+            return FramePipeline(detector, lambda k, body_id: BodyTracker(body, k, settings, body_id=body_id),
+                                 backward=settings.backward, centred_sigma_s=settings.centred_sigma_s)
+        pipeline = ensemble_of(member, tracker_config.seed, tracker_config.ensemble)
         frames_of: dict[int, Frame] = {}
         with progress_bar("personalise: track", frames or getattr(source, "length", None),
                           enabled=show_progress) as bar:

@@ -17,12 +17,14 @@ from pathlib import Path
 from swarmpose.body.loader import load_body
 from swarmpose.body.shape_space import ShapeSpace, shape_space_for
 from swarmpose.body.skinned import SkinnedBody
+from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.progress import progress_bar
 from swarmpose.detect.joints import Detector
 from swarmpose.detect.registry import make_detector, resolve_detector
 from swarmpose.messages.build import info_message
 from swarmpose.pipeline.config import ServiceConfig
+from swarmpose.pipeline.ensemble import EnsemblePipeline, ensemble_of
 from swarmpose.pipeline.status import HealthFileSink, LogSink, WorkerStats, latency_summary
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.pipeline.worker import Worker
@@ -37,6 +39,7 @@ from swarmpose.sources.registry import open_source
 from swarmpose.tracking.auto_height import ESTIMATES as HEIGHT_ESTIMATES
 from swarmpose.tracking.auto_height import HeightFittingTracker, applies
 from swarmpose.tracking.body_tracker import BodyTracker
+from swarmpose.tracking.config import TrackerConfig
 from swarmpose.tracking.online_personalise import PersonalisingTracker
 
 log = logging.getLogger(__name__)
@@ -52,7 +55,7 @@ class Parts:
     body: SkinnedBody
     source: FrameSource
     detector: Detector
-    pipeline: FramePipeline
+    pipeline: FramePipeline | EnsemblePipeline
     sinks: list[Sink] = field(default_factory=list)
     score: ScoreSink | None = None
     recording: list[Sink] = field(default_factory=list)
@@ -69,28 +72,34 @@ class Parts:
 
 
 def make_pipeline(body: SkinnedBody, detector: Detector, config: ServiceConfig,
-                  space: ShapeSpace | None = None) -> FramePipeline:
+                  space: ShapeSpace | None = None) -> FramePipeline | EnsemblePipeline:
     """The per-frame step tracking ``body`` with ``detector`` under ``config.tracker``; with a
     shape ``space`` and ``config.tracker.personalize`` N > 0, each person's tracker personalises
     its body from that person's first N tracked frames; else, where the automatic height applies
     (:func:`~swarmpose.tracking.auto_height.applies`), each scales it to the person's stature.
-    Both report in the status and info messages' ``personalisation``."""
+    Both report in the status and info messages' ``personalisation``. With ``config.tracker.ensemble``
+    N > 1, N such pipelines with seeds seed .. seed + N - 1, averaged (:mod:`swarmpose.pipeline.ensemble`)."""
     t = config.tracker
-    reported = 0  # the frames each body's personalisation needs, as status and info report it
     if space is not None and t.personalize > 0:
-        def make(intrinsics, body_id):
-            return PersonalisingTracker(space, t.personalize, intrinsics, t, body_id=body_id)
+        def tracker_of(settings: TrackerConfig, intrinsics: Intrinsics, body_id: int) -> BodyTracker:
+            return PersonalisingTracker(space, t.personalize, intrinsics, settings, body_id=body_id)
         reported = t.personalize
     elif applies(config.body, config.shape, t):
-        def make(intrinsics, body_id):
-            return HeightFittingTracker(body, intrinsics, t, body_id=body_id)
+        def tracker_of(settings: TrackerConfig, intrinsics: Intrinsics, body_id: int) -> BodyTracker:
+            return HeightFittingTracker(body, intrinsics, settings, body_id=body_id)
         reported = HEIGHT_ESTIMATES
     else:
-        def make(intrinsics, body_id):
-            return BodyTracker(body, intrinsics, t, body_id=body_id)
-    return FramePipeline(detector, make, t.max_people, t.retire_frames, personalise_frames=reported,
-                         world=make_world(config.floor, config.coordinates), backward=t.backward,
-                         centred_sigma_s=t.centred_sigma_s)
+        def tracker_of(settings: TrackerConfig, intrinsics: Intrinsics, body_id: int) -> BodyTracker:
+            return BodyTracker(body, intrinsics, settings, body_id=body_id)
+        reported = 0  # the frames each body's personalisation needs, as status and info report it
+
+    def pipeline(seed: int) -> FramePipeline:  # one track of every person (an ensemble's member: its seed)
+        settings = replace(t, seed=seed)
+        return FramePipeline(detector, lambda intrinsics, body_id: tracker_of(settings, intrinsics, body_id),
+                             t.max_people, t.retire_frames, personalise_frames=reported,
+                             world=make_world(config.floor, config.coordinates), backward=t.backward,
+                             centred_sigma_s=t.centred_sigma_s)
+    return ensemble_of(pipeline, t.seed, t.ensemble)
 
 
 def warn_of_another_body(source: FrameSource, body: SkinnedBody, config: ServiceConfig) -> None:
@@ -177,6 +186,10 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
         raise ConfigError(f"backward = {config.tracker.backward}: the backward pass publishes frames late and needs "
                           "the recording, which serve and replay do not wait for; run `swarmpose track SOURCE --out "
                           "DIR --backward N` (the same files as replay), or set backward 0")
+    if config.tracker.ensemble > 1:
+        raise ConfigError(f"ensemble = {config.tracker.ensemble}: serve and replay detect and track in two threads, "
+                          "one track per person; run `swarmpose track SOURCE --out DIR --ensemble N` (the same files "
+                          "as replay), or the Python API's Tracker, or set ensemble 1")
     if config.tracker.centred_sigma_s:
         raise ConfigError("smoothing centred averages each pose with the frames after it, which serve and replay "
                           "do not wait for; run `swarmpose track SOURCE --out DIR --smoothing centred` (the same "

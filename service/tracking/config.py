@@ -80,6 +80,12 @@ class TrackerConfig:
                                "with); 0 = off. Not with serve, replay or Tracker.track_frame (live), the lift "
                                "mode or one-euro smoothing (centred smoothing runs after it)",
                             minimum=0)
+    ensemble: int = setting(1, "track every frame this many times, with PSO seeds seed, seed + 1, ..., and publish "
+                               "the first track's people with each joint the confidence-weighted mean of the tracks' "
+                               "(the pose fitted to it): a joint the depth and the detector leave open lands "
+                               "elsewhere in each track, and their mean is nearer (this many times the time per "
+                               "frame; 1 = off). Not with serve or replay, the backward pass or the lift mode",
+                            minimum=1, maximum=16)
     auto_height: bool = setting(True, "a body whose shape is not given (no --shape, not a .glb) is scaled to each "
                                       "person's height, measured on the depth of their first upright frames")
     smoothing: str = setting("off", "smooth the published poses: off (as in evaluation), one-euro (a One-Euro "
@@ -114,6 +120,12 @@ class TrackerConfig:
             raise ConfigError(f"backward = {self.backward} with smoothing {self.smoothing}: the backward pass "
                               "publishes its own fits, which the filter would have to run over backwards; choose "
                               "one (smoothing off or centred, or backward 0)")
+        if self.ensemble > 1 and self.mode == "lift":
+            raise ConfigError(f"ensemble = {self.ensemble}: the lift mode has no search whose tracks could differ (use "
+                              "hybrid, depth or joints, or ensemble 1)")
+        if self.ensemble > 1 and self.backward:
+            raise ConfigError(f"ensemble = {self.ensemble} with backward = {self.backward}: the backward pass refits "
+                              "one track; choose one (ensemble 1, or backward 0)")
         if self.smoothing == "centred" and self.mode == "lift":
             raise ConfigError("smoothing centred fits the body's pose to the smoothed joints; the lift mode fits "
                               "no body (use hybrid, depth or joints, or smoothing off)")

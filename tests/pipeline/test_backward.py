@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import synthesize_scene
+from conftest import people_scores
 
 import swarmpose
 from swarmpose.body.loader import load_body
@@ -19,8 +19,6 @@ from swarmpose.detect.registry import make_detector
 from swarmpose.pipeline.backward import SETTLED_AGE, BackwardPass, StepInput, person_steps
 from swarmpose.pipeline.run import RunSummary, results, run_sequence
 from swarmpose.pipeline.step import FramePipeline
-from swarmpose.sim.people_metrics import TruePerson, score_people
-from swarmpose.sim.scoring import body_joints
 from swarmpose.sources.base import Frame
 from swarmpose.sources.groundtruth import load_ground_truth
 from swarmpose.sources.registry import open_source
@@ -75,20 +73,15 @@ def test_each_window_is_the_tracker_run_backwards_from_the_windows_last_solution
             assert "backward" in both[k].timings_ms
 
 
-def test_with_several_people_each_id_is_refit_on_its_own_frames(tmp_path):
-    folder = synthesize_scene(tmp_path / "two", ("builtin:male:builtin:walk@-0.7,0.3",
-                                                  "builtin:female:builtin:wave@0.6,-0.6"), 6, seed=3)
-    settings = {"particles": 16, "generations": 12, "max_people": 3, "auto_height": False}
-    forward = list(swarmpose.track(f"folder:{folder}", detector="simulated", **settings))
-    both = list(swarmpose.track(f"folder:{folder}", detector="simulated", backward=6, **settings))
+def test_with_several_people_each_id_is_refit_on_its_own_frames(two_people):
+    settings = {"particles": 16, "generations": 12, "max_people": 3, "auto_height": False, "frames": 6}
+    forward = list(swarmpose.track(f"folder:{two_people}", detector="simulated", **settings))
+    both = list(swarmpose.track(f"folder:{two_people}", detector="simulated", backward=6, **settings))
     assert [[b.id for b in r.bodies] for r in both] == [[b.id for b in r.bodies] for r in forward]
     refit = [not np.array_equal(a.pose, b.pose) for r, s in zip(forward[:-1], both[:-1])
              for a, b in zip(r.bodies, s.bodies)]
     assert sum(refit) >= len(refit) - 1  # every person's earlier frames were refit
-    gt = load_ground_truth(folder)
-    truth = {f: [TruePerson(p.id, p.joints3d, p.visible) for p in gt.people[gt.row(f)]] for f in gt.frames}
-    tracked = {r.index: {b.id: body_joints(b.to_message()) for b in r.bodies if b.state != "lost"} for r in both}
-    scores = score_people(truth, tracked)
+    scores = people_scores(two_people, both)
     assert scores["id_switches"] == 0 and scores["misses"] == 0
     assert all(s["mpjpe_mm"] < 120 for s in scores["per_person"].values())
 
@@ -151,12 +144,14 @@ def test_a_source_that_breaks_hands_on_the_frames_held_as_found_then_raises(wave
 
 
 @pytest.mark.parametrize("settings, words", [
-    ({"mode": "lift"}, "lift mode fits none"),
-    ({"smoothing": "one-euro"}, "choose one"),
+    ({"backward": 5, "mode": "lift"}, "lift mode fits none"),
+    ({"backward": 5, "smoothing": "one-euro"}, "choose one"),
+    ({"ensemble": 3, "mode": "lift"}, "no search"),
+    ({"ensemble": 3, "backward": 5}, "choose one"),
 ])
-def test_settings_the_backward_pass_cannot_serve_are_refused(settings, words):
+def test_settings_the_backward_pass_or_an_ensemble_cannot_serve_are_refused(settings, words):
     with pytest.raises(ConfigError, match=words):
-        TrackerConfig(backward=5, **settings)
+        TrackerConfig(**settings)
 
 
 def test_replay_and_the_frame_by_frame_tracker_refuse_it_and_name_what_to_run(wave_sequence, tmp_path, capsys):

@@ -294,11 +294,8 @@ def test_after_the_backward_pass_each_frame_is_fitted_with_the_body_it_was_refit
         assert np.allclose(b.joints3d, final.posed_points(b.pose[None], EVAL_JOINTS)[0], atol=1e-6), r.index
 
 
-def test_with_several_people_each_id_is_smoothed_on_its_own_track(tmp_path):
-    from conftest import synthesize_scene
-
-    folder = synthesize_scene(tmp_path / "two", ("builtin:male:builtin:walk@-0.7,0.3",
-                                                  "builtin:female:builtin:wave@0.6,-0.6"), 8, seed=3)
+def test_with_several_people_each_id_is_smoothed_on_its_own_track(two_people):
+    folder = two_people
     settings = {"particles": 16, "generations": 12, "max_people": 3, "auto_height": False}
     found = list(swarmpose.track(f"folder:{folder}", detector="simulated", **settings))
     smoothed = list(swarmpose.track(f"folder:{folder}", detector="simulated", smoothing="centred", **settings))

@@ -1,0 +1,186 @@
+"""Several independent tracks of the same frames, their joints averaged (``--ensemble N``).
+
+A particle swarm stops at one of the objective's minima, and which one it finds for a joint the
+depth and the detector do not pin down (an arm seen side on, behind the torso, under a wrong
+keypoint) depends on its random draws: the same recording tracked with another PSO seed puts such
+a joint elsewhere, for whole stretches of frames. :class:`EnsemblePipeline` runs ``N`` pipelines
+with seeds ``seed``, ``seed + 1``, ... over the same frames in lockstep, each with its own
+detector feedback, people, ids and bodies, and publishes the first one's people with each joint
+the mean of where the ``N`` tracks put it, each weighed by that track's confidence in the joint
+(plus :data:`~swarmpose.pipeline.centred_smoothing.CONFIDENCE_FLOOR`); the pose is then fitted to
+those joints (:func:`~swarmpose.pipeline.pose_to_joints.body_at_joints`, from the first track's
+pose), so the skeleton keeps the body's bone lengths. Why a mean and not the lowest objective: on
+the 3-person crossing the objective picked the wrong one of the tracks about as often as the right
+one (BENCHMARKS.md, several people, ninth part).
+
+The first pipeline decides who is there: another track's body counts for the person whose body it
+lies nearest (mean joint distance, at most :data:`MATCH_M`, one to one, scipy's
+``linear_sum_assignment``); a person only the others found is left out, and a person the others
+did not find is published as the first track has it. Each track searches on from its own
+solution: the average is published, never fed back. Each frame costs ``N`` times the detection
+and tracking; nothing is published late, so :class:`~swarmpose.pipeline.api.Tracker` may use it
+frame by frame; ``serve`` and ``replay`` (whose worker runs detection and tracking in two
+threads) refuse it, and so does the backward pass, whose refits follow one track.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from swarmpose.body.skinned import SkinnedBody
+from swarmpose.core.camera import Intrinsics
+from swarmpose.pipeline.centred_smoothing import CONFIDENCE_FLOOR
+from swarmpose.pipeline.pose_to_joints import body_at_joints
+from swarmpose.pipeline.step import FramePipeline
+from swarmpose.sources.base import Frame, SkippedFrame
+from swarmpose.tracking.result import BodyResult, FrameResult
+
+log = logging.getLogger(__name__)
+
+MATCH_M = 0.5
+"""Another track's body farther than this (mean joint distance, m) from every person of the first
+track's is nobody's."""
+
+
+def mean_joint_distances(a: Sequence[BodyResult], b: Sequence[BodyResult]) -> np.ndarray:
+    """(len(a), len(b)) mean distance (m) between the joints of each pair, over the joints both have
+    (inf where they share none)."""
+    out = np.full((len(a), len(b)), np.inf)
+    for i, x in enumerate(a):
+        for j, y in enumerate(b):
+            d = np.linalg.norm(np.asarray(x.joints3d, float) - np.asarray(y.joints3d, float), axis=1)
+            if np.isfinite(d).any():
+                out[i, j] = float(np.nanmean(d))
+    return out
+
+
+def matched_bodies(first: Sequence[BodyResult], other: Sequence[BodyResult]) -> dict[int, BodyResult]:
+    """Which of ``other`` counts for each of ``first`` (index in ``first`` -> body): one to one, by
+    the least total mean joint distance, pairs within :data:`MATCH_M` only."""
+    if not first or not other:
+        return {}
+    cost = mean_joint_distances(first, other)
+    rows, cols = linear_sum_assignment(np.where(np.isfinite(cost), cost, 1e6))
+    return {int(i): other[j] for i, j in zip(rows, cols) if cost[i, j] <= MATCH_M}
+
+
+def fused_joints(bodies: Sequence[BodyResult]) -> tuple[np.ndarray, np.ndarray]:
+    """Each joint's mean (J, 3) m over ``bodies``, weighed by each body's confidence in it plus
+    ``CONFIDENCE_FLOOR`` (a body without the joint left out; NaN where none has it), and the bodies'
+    mean confidence (J,)."""
+    joints = np.stack([np.asarray(b.joints3d, float) for b in bodies])  # (N, J, 3)
+    trust = np.nan_to_num(np.stack([np.asarray(b.confidence, float) for b in bodies])) + CONFIDENCE_FLOOR
+    trust = np.where(np.all(np.isfinite(joints), axis=2), trust, 0.0)  # (N, J)
+    total = trust.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.einsum("nj,njk->jk", trust, np.nan_to_num(joints)) / total[:, None]
+    mean[total <= 0] = np.nan
+    confidence = np.mean(np.nan_to_num(np.stack([b.confidence for b in bodies])), axis=0)
+    return mean, confidence
+
+
+class EnsemblePipeline:
+    """``members`` (two or more :class:`FramePipeline`, built alike but for the PSO seed) tracking the
+    same frames; :meth:`process` gives the first one's result with each person's joints and pose
+    averaged over the members (module doc). Offers what :func:`swarmpose.pipeline.run.results` and
+    :class:`~swarmpose.pipeline.api.Tracker` use of a pipeline."""
+
+    backward = 0  # the backward pass refits one track: refused with an ensemble (TrackerConfig)
+
+    def __init__(self, members: Sequence[FramePipeline]):
+        if len(members) < 2:
+            raise ValueError(f"an ensemble of {len(members)} pipelines; it needs at least 2")
+        self.members = list(members)
+        self.first = self.members[0]
+        self.on_step = None
+
+    @property
+    def centred_sigma_s(self) -> float:
+        return self.first.centred_sigma_s
+
+    @property
+    def intrinsics(self) -> Intrinsics | None:
+        return self.first.intrinsics
+
+    @property
+    def device_name(self) -> str:
+        return self.first.device_name
+
+    @property
+    def personalise_frames(self) -> int:
+        return self.first.personalise_frames
+
+    @property
+    def personalisation(self) -> dict | None:
+        return self.first.personalisation
+
+    @property
+    def world(self):
+        return self.first.world
+
+    def body_of(self, body_id: int) -> SkinnedBody | None:
+        """The body the first track fits person ``body_id`` with (the published poses are of it)."""
+        return self.first.body_of(body_id)
+
+    def process(self, item: Frame | SkippedFrame) -> FrameResult:
+        """Every member's result of ``item``, fused into the first one's (module doc)."""
+        results = [member.process(item) for member in self.members]
+        t0 = time.perf_counter()
+        fused = self.fuse(results)
+        ms = 1000 * (time.perf_counter() - t0)
+        timings = dict(fused.timings_ms)
+        timings["total"] = sum(r.timings_ms.get("total", 0.0) for r in results) + ms
+        timings["ensemble"] = ms
+        return replace(fused, timings_ms=timings)
+
+    def fuse(self, results: Sequence[FrameResult]) -> FrameResult:
+        """The first of ``results`` (one per member, the same frame) with each tracked body's joints the
+        confidence-weighted mean over the members' bodies matched to it, and its pose fitted to them."""
+        first, others = results[0], results[1:]
+        tracked = [k for k, b in enumerate(first.bodies) if b.state != "lost" and b.pose is not None]
+        if not tracked or first.skipped:
+            return first
+        mine = [first.bodies[k] for k in tracked]
+        votes: list[list[BodyResult]] = [[b] for b in mine]
+        for result in others:
+            theirs = [b for b in result.bodies if b.state != "lost" and b.pose is not None]
+            for i, body in matched_bodies(mine, theirs).items():
+                votes[i].append(body)
+        bodies = list(first.bodies)
+        for k, vote in zip(tracked, votes):
+            if len(vote) > 1:
+                bodies[k] = self._averaged(first.index, first.bodies[k], vote)
+        return replace(first, bodies=tuple(bodies))
+
+    def _averaged(self, index: int, body: BodyResult, votes: Sequence[BodyResult]) -> BodyResult:
+        """``body`` moved to the mean of ``votes``' joints; as it is where that fails (logged)."""
+        skinned, intrinsics = self.first.body_of(body.id), self.first.intrinsics
+        if skinned is None or intrinsics is None:
+            return body
+        joints, confidence = fused_joints(votes)
+        try:
+            averaged = body_at_joints(body, skinned, intrinsics, body.pose, joints)
+        except Exception as exc:  # that body is published as the first track found it; the run goes on
+            log.warning("the ensemble's average of person %d at frame %d failed (%s: %s); published as the first "
+                        "track found it", body.id, index, type(exc).__name__, exc)
+            return body
+        return replace(averaged, confidence=confidence)
+
+    def reset(self) -> None:
+        """Forget every member's tracks."""
+        for member in self.members:
+            member.reset()
+
+
+def ensemble_of(make: Callable[[int], FramePipeline], seed: int, size: int) -> FramePipeline | EnsemblePipeline:
+    """``make(seed)`` alone when ``size`` is 1, else an :class:`EnsemblePipeline` of ``make(seed + k)``
+    for k = 0 .. size - 1."""
+    if size <= 1:
+        return make(seed)
+    return EnsemblePipeline([make(seed + k) for k in range(size)])
