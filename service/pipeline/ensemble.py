@@ -13,10 +13,13 @@ pose), so the skeleton keeps the body's bone lengths. Why a mean and not the low
 the 3-person crossing the objective picked the wrong one of the tracks about as often as the right
 one (BENCHMARKS.md, several people, ninth part).
 
-The first pipeline decides who is there: another track's body counts for the person whose body it
-lies nearest (mean joint distance, at most :data:`MATCH_M`, one to one, scipy's
-``linear_sum_assignment``); a person only the others found is left out, and a person the others
-did not find is published as the first track has it. Each track searches on from its own
+The first pipeline decides who is there: the other tracks' bodies are assigned one to one to its
+people by the least total mean joint distance (scipy's ``linear_sum_assignment``; a pair farther
+apart than :data:`MATCH_M`, or turned the other way, is no pair); a person only the others found is
+left out, and a person the others did not find is published as the first track has it. The members
+share the detector (each calls it on its own crops; a BlazePose detector's memory of the last
+whole-frame detection, used where a track has no box, is shared too) and only the first one keeps
+the world frame (``--floor``). Each track searches on from its own
 solution: the average is published, never fed back. Each frame costs ``N`` times the detection
 and tracking; nothing is published late, so :class:`~swarmpose.pipeline.api.Tracker` may use it
 frame by frame; ``serve`` and ``replay`` (whose worker runs detection and tracking in two
@@ -33,6 +36,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.pipeline.centred_smoothing import CONFIDENCE_FLOOR
@@ -60,20 +64,40 @@ def mean_joint_distances(a: Sequence[BodyResult], b: Sequence[BodyResult]) -> np
     return out
 
 
+LEFT_RIGHT = ((EVAL_JOINTS.index("left_shoulder"), EVAL_JOINTS.index("right_shoulder")),
+              (EVAL_JOINTS.index("left_hip"), EVAL_JOINTS.index("right_hip")))
+
+
+def left_axis(body: BodyResult) -> np.ndarray:
+    """(3,) from the body's right shoulder and hip to its left ones, camera frame (NaN where unknown)."""
+    joints = np.asarray(body.joints3d, float)
+    return sum(joints[left] - joints[right] for left, right in LEFT_RIGHT)
+
+
+def same_facing(a: BodyResult, b: BodyResult) -> bool:
+    """Whether ``a`` and ``b`` have their left on the same side (their left axes less than 90 degrees
+    apart); True where either lacks the shoulders and hips to tell."""
+    dot = float(left_axis(a) @ left_axis(b))
+    return not np.isfinite(dot) or dot > 0
+
+
 def matched_bodies(first: Sequence[BodyResult], other: Sequence[BodyResult]) -> dict[int, BodyResult]:
     """Which of ``other`` counts for each of ``first`` (index in ``first`` -> body): one to one, by
-    the least total mean joint distance, pairs within :data:`MATCH_M` only."""
+    the least total mean joint distance, pairs within :data:`MATCH_M` only, and never a body whose
+    left is on the other side (:func:`same_facing`: a track locked in the mirrored facing, or with
+    left and right swapped, lies within reach of the person, and its average would pull both
+    shoulders to the middle)."""
     if not first or not other:
         return {}
     cost = mean_joint_distances(first, other)
     rows, cols = linear_sum_assignment(np.where(np.isfinite(cost), cost, 1e6))
-    return {int(i): other[j] for i, j in zip(rows, cols) if cost[i, j] <= MATCH_M}
+    return {int(i): other[j] for i, j in zip(rows, cols) if cost[i, j] <= MATCH_M and same_facing(first[i], other[j])}
 
 
 def fused_joints(bodies: Sequence[BodyResult]) -> tuple[np.ndarray, np.ndarray]:
     """Each joint's mean (J, 3) m over ``bodies``, weighed by each body's confidence in it plus
-    ``CONFIDENCE_FLOOR`` (a body without the joint left out; NaN where none has it), and the bodies'
-    mean confidence (J,)."""
+    ``CONFIDENCE_FLOOR`` (a body without the joint left out; NaN where none has it), and the mean
+    confidence (J,) of the bodies that have the joint (the first body's where none has it)."""
     joints = np.stack([np.asarray(b.joints3d, float) for b in bodies])  # (N, J, 3)
     trust = np.nan_to_num(np.stack([np.asarray(b.confidence, float) for b in bodies])) + CONFIDENCE_FLOOR
     trust = np.where(np.all(np.isfinite(joints), axis=2), trust, 0.0)  # (N, J)
@@ -81,7 +105,10 @@ def fused_joints(bodies: Sequence[BodyResult]) -> tuple[np.ndarray, np.ndarray]:
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = np.einsum("nj,njk->jk", trust, np.nan_to_num(joints)) / total[:, None]
     mean[total <= 0] = np.nan
-    confidence = np.mean(np.nan_to_num(np.stack([b.confidence for b in bodies])), axis=0)
+    have = trust > 0
+    scores = np.nan_to_num(np.stack([np.asarray(b.confidence, float) for b in bodies]))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        confidence = np.where(have.any(axis=0), (scores * have).sum(axis=0) / have.sum(axis=0), scores[0])
     return mean, confidence
 
 
@@ -164,6 +191,8 @@ class EnsemblePipeline:
         if skinned is None or intrinsics is None:
             return body
         joints, confidence = fused_joints(votes)
+        if not np.all(np.isfinite(joints)):  # a joint no track has: nothing to fit the pose to
+            return body
         try:
             averaged = body_at_joints(body, skinned, intrinsics, body.pose, joints)
         except Exception as exc:  # that body is published as the first track found it; the run goes on

@@ -26,10 +26,12 @@ def body_at_joints(body: BodyResult, skinned: SkinnedBody, intrinsics: Intrinsic
     ``EVAL_JOINTS`` order: its pose fitted from ``start`` (36,) so that the body's own points move as
     ``joints`` move from ``body.joints3d`` (a tracker's published joints may differ from ``skinned``'s
     points by a locked height); the published joints are ``body``'s moved as those points moved, the 2D
-    joints their projections, ``unfiltered`` the ``body`` given. Where ``joints`` is not finite, the pose
-    is ``start``."""
+    joints their projections, ``unfiltered`` what the search found (``body.found``). Where the targets
+    are not finite, the pose is ``start``."""
     found = skinned.posed_points(body.pose[None], EVAL_JOINTS)[0]
-    pose = (fit_pose_to_points(skinned, start, EVAL_JOINTS, found + joints - body.joints3d)
-            if np.all(np.isfinite(joints)) else np.asarray(start, dtype=np.float64))
+    targets = found + joints - body.joints3d
+    pose = (fit_pose_to_points(skinned, start, EVAL_JOINTS, targets)
+            if np.all(np.isfinite(targets)) else np.asarray(start, dtype=np.float64))
     joints3d = body.joints3d + skinned.posed_points(pose[None], EVAL_JOINTS)[0] - found
-    return replace(body, pose=pose, joints3d=joints3d, joints2d=intrinsics.project(joints3d), unfiltered=body)
+    return replace(body, pose=pose, joints3d=joints3d, joints2d=intrinsics.project(joints3d),
+                   unfiltered=body.found)

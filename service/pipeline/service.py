@@ -93,11 +93,13 @@ def make_pipeline(body: SkinnedBody, detector: Detector, config: ServiceConfig,
             return BodyTracker(body, intrinsics, settings, body_id=body_id)
         reported = 0  # the frames each body's personalisation needs, as status and info report it
 
-    def pipeline(seed: int) -> FramePipeline:  # one track of every person (an ensemble's member: its seed)
+    def pipeline(seed: int) -> FramePipeline:  # one track of every person (an ensemble's member: its seed;
+        # only the first one's world frame is published)
         settings = replace(t, seed=seed)
         return FramePipeline(detector, lambda intrinsics, body_id: tracker_of(settings, intrinsics, body_id),
                              t.max_people, t.retire_frames, personalise_frames=reported,
-                             world=make_world(config.floor, config.coordinates), backward=t.backward,
+                             world=make_world(config.floor, config.coordinates) if seed == t.seed else None,
+                             backward=t.backward,
                              centred_sigma_s=t.centred_sigma_s)
     return ensemble_of(pipeline, t.seed, t.ensemble)
 

@@ -41,7 +41,10 @@ def test_each_joint_is_the_confidence_weighted_mean_of_the_tracks_that_have_it()
         w = np.array([trust[n, q] + CONFIDENCE_FLOOR for n in have])
         by_hand = sum(wi * joints[n, q] for wi, n in zip(w, have)) / w.sum()
         assert np.allclose(mean[q], by_hand), q
-    assert np.allclose(confidence, trust.mean(axis=0))
+    have = np.all(np.isfinite(joints), axis=2)
+    for q in range(J):
+        expected = trust[have[:, q], q].mean() if have[:, q].any() else trust[0, q]
+        assert np.isclose(confidence[q], expected), q
 
 
 def test_another_tracks_people_count_for_the_nearest_person_one_to_one_and_within_reach():
@@ -53,6 +56,22 @@ def test_another_tracks_people_count_for_the_nearest_person_one_to_one_and_withi
     assert {k: v.id for k, v in matched_bodies(first, [near_b, near_a]).items()} == {0: 9, 1: 8}
     assert {k: v.id for k, v in matched_bodies(first, [far, near_b]).items()} == {1: 8}  # too far: nobody's
     assert matched_bodies(first, []) == {}
+
+
+def test_a_track_with_its_left_on_the_other_side_is_nobodys():
+    """A track locked in the mirrored facing (or with left and right swapped) lies within reach of
+    the person, and averaging it in would pull both shoulders to the middle."""
+    rng = np.random.default_rng(2)
+    joints = rng.normal(scale=0.05, size=(J, 3))
+    for left, right in (("left_shoulder", "right_shoulder"), ("left_hip", "right_hip")):
+        joints[EVAL_JOINTS.index(left), 0] += 0.17
+        joints[EVAL_JOINTS.index(right), 0] -= 0.17
+    mirrored = joints.copy()
+    mirrored[:, 0] *= -1  # turned about the vertical through the body's middle
+    assert np.linalg.norm(mirrored - joints, axis=1).mean() < MATCH_M  # near enough to be matched by distance
+    first = [_body(joints, body_id=1)]
+    assert matched_bodies(first, [_body(mirrored, body_id=2)]) == {}
+    assert {k: v.id for k, v in matched_bodies(first, [_body(joints + 0.02, body_id=3)]).items()} == {0: 3}
 
 
 def _mean_error_mm(folder, run) -> float:
@@ -102,4 +121,19 @@ def test_replay_refuses_it_and_names_what_to_run(wave_sequence, tmp_path, capsys
 
 def test_an_ensemble_of_one_is_refused():
     with pytest.raises(ValueError, match="at least 2"):
-        EnsemblePipeline([])
+        EnsemblePipeline([object()])
+
+
+def test_track_writes_the_averaged_and_smoothed_poses_and_keeps_the_search_result(wave_sequence, tmp_path):
+    """``track --ensemble 2 --smoothing centred``: every frame written; what a published body calls
+    its search result is the first track's own (the run made with seed 0 alone)."""
+    settings = {"particles": 12, "generations": 8, "max_people": 1, "auto_height": False}
+    assert main(["track", str(wave_sequence), "--out", str(tmp_path), "--ensemble", "2", "--smoothing", "centred",
+                 "--particles", "12", "--generations", "8", "--max-people", "1", "--no-auto-height", "-q"]) == 0
+    assert len((tmp_path / "poses.jsonl").read_text().splitlines()) == 6
+    alone = list(swarmpose.track(f"folder:{wave_sequence}", detector="simulated", **settings))
+    both = list(swarmpose.track(f"folder:{wave_sequence}", detector="simulated", ensemble=2, smoothing="centred",
+                                **settings))
+    for a, b in zip(alone, both):
+        assert np.array_equal(b.bodies[0].found.pose, a.bodies[0].pose)
+        assert not np.allclose(b.bodies[0].joints3d, a.bodies[0].joints3d)
