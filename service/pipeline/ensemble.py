@@ -36,12 +36,13 @@ from dataclasses import replace
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.pipeline.centred_smoothing import CONFIDENCE_FLOOR
 from swarmpose.pipeline.pose_to_joints import body_at_joints
 from swarmpose.pipeline.step import FramePipeline
+from swarmpose.sim.evaluate import torso_facing
+from swarmpose.sim.people_metrics import mean_joint_distance
 from swarmpose.sources.base import Frame, SkippedFrame
 from swarmpose.tracking.result import BodyResult, FrameResult
 
@@ -53,40 +54,26 @@ track's is nobody's."""
 
 
 def mean_joint_distances(a: Sequence[BodyResult], b: Sequence[BodyResult]) -> np.ndarray:
-    """(len(a), len(b)) mean distance (m) between the joints of each pair, over the joints both have
-    (inf where they share none)."""
-    out = np.full((len(a), len(b)), np.inf)
-    for i, x in enumerate(a):
-        for j, y in enumerate(b):
-            d = np.linalg.norm(np.asarray(x.joints3d, float) - np.asarray(y.joints3d, float), axis=1)
-            if np.isfinite(d).any():
-                out[i, j] = float(np.nanmean(d))
-    return out
-
-
-LEFT_RIGHT = ((EVAL_JOINTS.index("left_shoulder"), EVAL_JOINTS.index("right_shoulder")),
-              (EVAL_JOINTS.index("left_hip"), EVAL_JOINTS.index("right_hip")))
-
-
-def left_axis(body: BodyResult) -> np.ndarray:
-    """(3,) from the body's right shoulder and hip to its left ones, camera frame (NaN where unknown)."""
-    joints = np.asarray(body.joints3d, float)
-    return sum(joints[left] - joints[right] for left, right in LEFT_RIGHT)
+    """(len(a), len(b)) :func:`~swarmpose.sim.people_metrics.mean_joint_distance` (m) of each pair's
+    joints (inf where they share none)."""
+    out = np.array([[mean_joint_distance(x.joints3d, y.joints3d) for y in b] for x in a], dtype=np.float64)
+    return np.where(np.isfinite(out), out, np.inf).reshape(len(a), len(b))
 
 
 def same_facing(a: BodyResult, b: BodyResult) -> bool:
-    """Whether ``a`` and ``b`` have their left on the same side (their left axes less than 90 degrees
-    apart); True where either lacks the shoulders and hips to tell."""
-    dot = float(left_axis(a) @ left_axis(b))
+    """Whether ``a`` and ``b`` face the same way (their :func:`~swarmpose.sim.evaluate.torso_facing`
+    less than 90 degrees apart: a mirrored facing and left and right swapped both turn it round);
+    True where either lacks the torso joints to tell."""
+    dot = float(np.sum(torso_facing(np.stack([a.joints3d, b.joints3d])).prod(axis=0)))
     return not np.isfinite(dot) or dot > 0
 
 
 def matched_bodies(first: Sequence[BodyResult], other: Sequence[BodyResult]) -> dict[int, BodyResult]:
     """Which of ``other`` counts for each of ``first`` (index in ``first`` -> body): one to one, by
-    the least total mean joint distance, pairs within :data:`MATCH_M` only, and never a body whose
-    left is on the other side (:func:`same_facing`: a track locked in the mirrored facing, or with
-    left and right swapped, lies within reach of the person, and its average would pull both
-    shoulders to the middle)."""
+    the least total mean joint distance, pairs within :data:`MATCH_M` only, and never a body facing
+    the other way (:func:`same_facing`: a track locked in the mirrored facing, or with left and right
+    swapped, lies within reach of the person, and its average would pull both shoulders to the
+    middle)."""
     if not first or not other:
         return {}
     cost = mean_joint_distances(first, other)
@@ -99,16 +86,13 @@ def fused_joints(bodies: Sequence[BodyResult]) -> tuple[np.ndarray, np.ndarray]:
     ``CONFIDENCE_FLOOR`` (a body without the joint left out; NaN where none has it), and the mean
     confidence (J,) of the bodies that have the joint (the first body's where none has it)."""
     joints = np.stack([np.asarray(b.joints3d, float) for b in bodies])  # (N, J, 3)
-    trust = np.nan_to_num(np.stack([np.asarray(b.confidence, float) for b in bodies])) + CONFIDENCE_FLOOR
-    trust = np.where(np.all(np.isfinite(joints), axis=2), trust, 0.0)  # (N, J)
-    total = trust.sum(axis=0)
+    scores = np.nan_to_num(np.stack([np.asarray(b.confidence, float) for b in bodies]))  # (N, J)
+    have = np.all(np.isfinite(joints), axis=2)  # (N, J)
+    trust = np.where(have, scores + CONFIDENCE_FLOOR, 0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
-        mean = np.einsum("nj,njk->jk", trust, np.nan_to_num(joints)) / total[:, None]
-    mean[total <= 0] = np.nan
-    have = trust > 0
-    scores = np.nan_to_num(np.stack([np.asarray(b.confidence, float) for b in bodies]))
-    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.einsum("nj,njk->jk", trust, np.nan_to_num(joints)) / trust.sum(axis=0)[:, None]
         confidence = np.where(have.any(axis=0), (scores * have).sum(axis=0) / have.sum(axis=0), scores[0])
+    mean[~have.any(axis=0)] = np.nan
     return mean, confidence
 
 
