@@ -3,14 +3,16 @@
 # slider mixes, personalise each from its first frames, and print one JSON line per subject with
 # the true and recovered height, volume and mean vertex distance. Resumable: a subject whose
 # OUT/<subject>.json exists is skipped.
-#   usage: scripts/bench-personalise.sh OUT [FRAMES] [PARTICLES] [SEED]
+#   usage: scripts/bench-personalise.sh OUT [FRAMES] [PARTICLES] [SEED] [ENSEMBLE]
 # (PARTICLES: particles and generations of the tracking and pose refits; the shape PSO is 16 x 16;
-# SEED: the fit's --seed, 0 by default)
+# SEED: the fit's --seed, 0 by default; ENSEMBLE: personalize's --ensemble, the tracks whose
+# joints are averaged over the frames the fit reads, 1 by default)
 set -euo pipefail
-OUT=${1:?usage: scripts/bench-personalise.sh OUT [FRAMES] [PARTICLES] [SEED]}
+OUT=${1:?usage: scripts/bench-personalise.sh OUT [FRAMES] [PARTICLES] [SEED] [ENSEMBLE]}
 FRAMES=${2:-30}
 P=${3:-32}
 SEED=${4:-0}
+ENSEMBLE=${5:-1}
 S=${SWARMPOSE:-.venv/bin/swarmpose}
 PY=${PYTHON:-.venv/bin/python}
 MH=${MH:-../shared/assets/bodies/makehuman}
@@ -24,7 +26,7 @@ for subject in "${SUBJECTS[@]}"; do
   name=$(echo "$subject" | tr '=,' '-_')
   [ -s "$OUT/$name.json" ] && continue
   "$S" -q synth --body "makehuman:$MH" --shape "$subject" --motion "$CLIP" --frames "$FRAMES" --out "$OUT/seq-$name" >/dev/null
-  "$S" -q personalize "$OUT/seq-$name" --body "makehuman:$MH" --frames "$FRAMES" --particles "$P" --generations "$P" --seed "$SEED" \
+  "$S" -q personalize "$OUT/seq-$name" --body "makehuman:$MH" --frames "$FRAMES" --particles "$P" --generations "$P" --seed "$SEED" --ensemble "$ENSEMBLE" \
       --out "$OUT/$name.glb" --json > "$OUT/$name.fit.json"
   "$PY" - "$MH" "$subject" "$OUT/$name.fit.json" "$OUT/$name.glb" > "$OUT/$name.json" <<'PYEOF'
 import json, sys
