@@ -15,8 +15,9 @@ one (BENCHMARKS.md, several people, ninth part).
 
 The first pipeline decides who is there: the other tracks' bodies are assigned one to one to its
 people by the least total mean joint distance (scipy's ``linear_sum_assignment``; a pair farther
-apart than :data:`MATCH_M`, or turned the other way, is no pair); a person only the others found is
-left out, and a person the others did not find is published as the first track has it. The members
+apart than :data:`MATCH_M`, or turned the other way, is no pair and takes no one's place in the
+assignment); a person only the others found is left out, and a person the others did not find is
+published as the first track has it. The members
 share the detector (each calls it on its own crops; a BlazePose detector's memory of the last
 whole-frame detection, used where a track has no box, is shared too) and only the first one keeps
 the world frame (``--floor``). Each track searches on from its own
@@ -70,15 +71,17 @@ def same_facing(a: BodyResult, b: BodyResult) -> bool:
 
 def matched_bodies(first: Sequence[BodyResult], other: Sequence[BodyResult]) -> dict[int, BodyResult]:
     """Which of ``other`` counts for each of ``first`` (index in ``first`` -> body): one to one, by
-    the least total mean joint distance, pairs within :data:`MATCH_M` only, and never a body facing
+    the least total mean joint distance among the pairs within :data:`MATCH_M`, never a body facing
     the other way (:func:`same_facing`: a track locked in the mirrored facing, or with left and right
     swapped, lies within reach of the person, and its average would pull both shoulders to the
     middle)."""
     if not first or not other:
         return {}
     cost = mean_joint_distances(first, other)
-    rows, cols = linear_sum_assignment(np.where(np.isfinite(cost), cost, 1e6))
-    return {int(i): other[j] for i, j in zip(rows, cols) if cost[i, j] <= MATCH_M and same_facing(first[i], other[j])}
+    pairable = cost <= MATCH_M  # inf (no joint shared) is never pairable
+    pairable &= np.array([[same_facing(a, b) for b in other] for a in first]).reshape(pairable.shape)
+    rows, cols = linear_sum_assignment(np.where(pairable, cost, 1e6))  # an unpairable body takes no one's place
+    return {int(i): other[j] for i, j in zip(rows, cols) if pairable[i, j]}
 
 
 def fused_joints(bodies: Sequence[BodyResult]) -> tuple[np.ndarray, np.ndarray]:

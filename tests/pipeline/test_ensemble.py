@@ -71,6 +71,12 @@ def test_a_track_with_its_left_on_the_other_side_is_nobodys():
     first = [_body(joints, body_id=1)]
     assert matched_bodies(first, [_body(mirrored, body_id=2)]) == {}
     assert {k: v.id for k, v in matched_bodies(first, [_body(joints + 0.02, body_id=3)]).items()} == {0: 3}
+    # a turned track nearer than a right one takes nobody's place: the right one is still the pair
+    nearer = np.linalg.norm(mirrored - joints, axis=1).mean()
+    farther = joints + [nearer + 0.05, 0.0, 0.0]
+    assert nearer < np.linalg.norm(farther - joints, axis=1).mean() < MATCH_M
+    pairs = matched_bodies(first, [_body(mirrored, body_id=2), _body(farther, body_id=4)])
+    assert {k: v.id for k, v in pairs.items()} == {0: 4}
 
 
 def _mean_error_mm(folder, run) -> float:
