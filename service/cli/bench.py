@@ -212,7 +212,7 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
                    help="full: 15 sequences x 3 detectors; regression: walk from the side and behind, MoveNet")
     p.add_argument("--detectors", type=_names(tuple(DETECTORS)), default=None,
                    help=f"comma-separated subset of {', '.join(DETECTORS)} (default: the subset's)")
-    p.add_argument("--modes", type=_names(MODES), default=MODES, help="comma-separated tracker modes")
+    p.add_argument("--modes", type=_names(MODES), default=",".join(MODES), help="comma-separated tracker modes")
     p.add_argument("--frames", type=positive_int, default=40, help="frames per sequence")
     p.add_argument("--max-people", type=positive_int, default=1,
                    help="people tracked per frame (> 1: segmentation and a detection per person)")
@@ -227,16 +227,16 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
                          help="the tracker on UTD-MHAD's real Kinect depth against its skeletons (resumable)")
     p.add_argument("--out", required=True, help="folder of the per-sequence results and the table; run again "
                                                 "to resume")
-    p.add_argument("--modes", type=_names(MODES), default=("hybrid",), help="comma-separated tracker modes")
-    p.add_argument("--detectors", type=_names(tuple(DETECTORS)), default=("simulated",),
+    p.add_argument("--modes", type=_names(MODES), default="hybrid", help="comma-separated tracker modes")
+    p.add_argument("--detectors", type=_names(tuple(DETECTORS)), default="simulated",
                    help="comma-separated: simulated (from the Kinect skeleton) and/or networks on the shaded depth")
-    p.add_argument("--shapes", type=_names(SHAPES), default=("default",),
+    p.add_argument("--shapes", type=_names(SHAPES), default="default",
                    help="default: the body's default shape (scaled to the person by the tracker's automatic "
                         "height unless --no-auto-height); measured: the subject's height measured on the first "
                         "frames of their sequences")
     p.add_argument("--auto-height", action=argparse.BooleanOptionalAction, default=True,
                    help="the tracker's automatic height for the default shape (on: the tracker's default)")
-    p.add_argument("--subjects", type=_names(SUBJECTS), default=SUBJECTS, help="comma-separated subjects")
+    p.add_argument("--subjects", type=_names(SUBJECTS), default=",".join(SUBJECTS), help="comma-separated subjects")
     p.add_argument("--actions", type=_names(tuple(str(a) for a in ACTIONS)), default=(),
                    help="comma-separated action numbers 1..27 (default: all)")
     p.add_argument("--frames", type=int, default=0, help="first frames of each sequence (0 = all)")

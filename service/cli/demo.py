@@ -3,7 +3,7 @@
 1. synthesise a short sequence with the built-in body and the built-in ``wave`` motion;
 2. start the worker on it, publishing over zenoh in peer mode on a free local port
    (multicast scouting off, so nothing leaves the machine) and recording the replay files;
-3. start a separate subscriber process (``python -m swarmpose.publish.client``) that prints the
+3. start a separate subscriber process (``python -m swarmpose subscribe``) that prints the
    first poses it receives;
 4. print Δ and A(t) against the ground truth, fps, latency and where the outputs are.
 

@@ -131,3 +131,20 @@ def test_bench_score_json_has_the_documented_keys(capsys):
         assert key in result
     assert result["particles"] == 4 and result["resolution"] == [16, 16] and result["max_sum_difference"] < 1e-4
     assert _run("bench", "score", "--resolution", "64by64").returncode == 2
+
+
+def test_bench_name_lists_default_to_the_values_their_help_shows():
+    """The comma-separated bench options parse their defaults as a typed value would (a tuple of
+    names), and their help shows the names as one would type them, not a tuple's repr."""
+    from swarmpose.cli.main import build_parser
+
+    parser = build_parser()
+    utd = parser.parse_args(["bench", "utdmhad", "--out", "x"])
+    assert (utd.modes, utd.detectors, utd.shapes, utd.subjects) == (("hybrid",), ("simulated",), ("default",),
+                                                                     ("s1", "s2", "s3"))
+    assert utd.modes == parser.parse_args(["bench", "utdmhad", "--out", "x", "--modes", "hybrid"]).modes
+    accuracy = parser.parse_args(["bench", "accuracy", "--out", "x"])
+    assert accuracy.modes == ("hybrid", "joints", "depth", "lift")
+    text = subprocess.run([sys.executable, "-m", "swarmpose", "bench", "utdmhad", "--help"], capture_output=True,
+                          text=True, check=True).stdout
+    assert "(default: hybrid)" in " ".join(text.split()) and "('hybrid'" not in text
