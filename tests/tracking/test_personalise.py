@@ -328,12 +328,15 @@ def test_personalize_refuses_a_fixed_body_and_a_recording_without_a_person(tall_
     assert ".glb" in capsys.readouterr().err
 
 
-@needs_assets
-def test_personalize_n_locks_each_bodys_shape_online_and_status_and_info_say_so(tall_walk):
-    """`--personalize 10` on a worker run: statuses go from collecting to locked with the fitted
-    parameters (valid against the schemas), the tracker then tracks with the fitted body, and
-    the info message carries the same state."""
+@pytest.fixture(scope="module")
+def online_run(tall_walk, tmp_path_factory):
+    """One worker run of ``--personalize 10`` over the tall walk's 16 frames, publishing to a
+    validating sink and writing the replay files (the fit takes most of its 100 s, so the tests
+    of what the run says and writes share it): the sink, the parts, the start body, the
+    personalisation the worker reported before any frame, the info message after the run and
+    the output folder."""
     from contextlib import ExitStack
+    from types import SimpleNamespace
 
     from swarmpose.messages import validate
     from swarmpose.messages.build import info_message
@@ -344,65 +347,65 @@ def test_personalize_n_locks_each_bodys_shape_online_and_status_and_info_say_so(
     from swarmpose.tracking.config import TrackerConfig
 
     uri = f"folder:{tall_walk}"
-    config = ServiceConfig(source=uri, body=f"makehuman:{MAKEHUMAN}",
+    out = tmp_path_factory.mktemp("online")
+    config = ServiceConfig(source=uri, body=f"makehuman:{MAKEHUMAN}", overlay=False,
                            tracker=TrackerConfig(personalize=10, particles=16, generations=16, max_people=1))
     sink = ValidatingSink()
     with ExitStack() as stack:
-        parts = open_parts(config, stack)
-        worker = Worker(lambda: open_source(uri), parts.pipeline, [sink], camera="test", drop_stale=False,
-                        source_uri=uri, status_period_s=0.1, source=parts.source)
-        assert worker.stats.personalisation == {"needed": 10, "bodies": []}  # before any frame
+        parts = open_parts(config, stack, out=str(out))
+        worker = Worker(lambda: open_source(uri), parts.pipeline, [sink, *parts.sinks], camera="test",
+                        drop_stale=False, source_uri=uri, status_period_s=0.1, source=parts.source)
+        before = worker.stats.personalisation
         worker.run()
-        states = [(s["tracker"].get("personalisation", {}).get("bodies") or [{}])[0].get("state")
-                  for s in sink.statuses]  # before the first frame: personalisation on, no body yet
-        assert "collecting" in states and states[-1] == "locked", states
-        locked = sink.statuses[-1]["tracker"]["personalisation"]["bodies"][0]
-        assert locked["frames"] == locked["needed"] == 10
-        assert abs(locked["height_m"] - 1.929) < 0.06, locked  # the start body is 1.68 m
-        tracker = parts.pipeline.tracker
-        assert tracker.body.height == pytest.approx(locked["height_m"], abs=0.01)  # tracking LOD of the fit
-        info = validate(info_message("test", body=tracker.body, body_spec=config.body,
+        info = validate(info_message("test", body=parts.pipeline.tracker.body, body_spec=config.body,
                                      personalisation=parts.pipeline.personalisation))
-        assert info["body"]["personalisation"]["bodies"][0]["parameters"] == locked["parameters"]
+    return SimpleNamespace(sink=sink, parts=parts, start=parts.body, before=before, info=info, out=out)
+
+
+@needs_assets
+def test_personalize_n_locks_each_bodys_shape_online_and_status_and_info_say_so(online_run):
+    """`--personalize 10` on a worker run: statuses go from collecting to locked with the fitted
+    parameters (valid against the schemas), the tracker then tracks with the fitted body, and
+    the info message carries the same state."""
+    sink = online_run.sink
+    assert online_run.before == {"needed": 10, "bodies": []}  # before any frame
+    states = [(s["tracker"].get("personalisation", {}).get("bodies") or [{}])[0].get("state")
+              for s in sink.statuses]  # before the first frame: personalisation on, no body yet
+    assert "collecting" in states and states[-1] == "locked", states
+    locked = sink.statuses[-1]["tracker"]["personalisation"]["bodies"][0]
+    assert locked["frames"] == locked["needed"] == 10
+    assert abs(locked["height_m"] - 1.929) < 0.06, locked  # the start body is 1.68 m
+    tracker = online_run.parts.pipeline.tracker
+    assert tracker.body.height == pytest.approx(locked["height_m"], abs=0.01)  # tracking LOD of the fit
+    assert online_run.info["body"]["personalisation"]["bodies"][0]["parameters"] == locked["parameters"]
     assert len(sink.frames) == 16 and all(m["bodies"] for m in sink.frames)
 
 
 @needs_assets
-def test_personalize_n_writes_the_bvh_of_the_locked_body(tall_walk, tmp_path):
+def test_personalize_n_writes_the_bvh_of_the_locked_body(online_run):
     """`--personalize 10 --out DIR`: poses.bvh animates the fitted body, not the start body:
     its offsets are the locked rig's bones and a row written before the lock places the
     joints (read back with the third-party bvhio) where the numpy FK of that frame's pose on the
     locked rig does."""
-    from contextlib import ExitStack
-
     import bvhio
 
     from swarmpose.body.kinematics import forward_kinematics
     from swarmpose.motion.bvh import read_bvh
-    from swarmpose.pipeline.config import ServiceConfig
-    from swarmpose.pipeline.run import run_sequence
-    from swarmpose.pipeline.service import open_parts
     from swarmpose.publish.bvh_file import bvh_transform
-    from swarmpose.tracking.config import TrackerConfig
 
-    config = ServiceConfig(source=f"folder:{tall_walk}", body=f"makehuman:{MAKEHUMAN}", overlay=False,
-                           tracker=TrackerConfig(personalize=10, particles=16, generations=16, max_people=1))
-    with ExitStack() as stack:
-        parts = open_parts(config, stack, out=str(tmp_path))
-        start = parts.body
-        run_sequence(parts.source, parts.pipeline, parts.sinks, frames=12, progress=False)
-        locked = parts.pipeline.tracker.body
+    parts, out = online_run.parts, online_run.out
+    locked = parts.pipeline.tracker.body
     assert parts.pipeline.tracker.personalisation()["state"] == "locked"
-    assert abs(locked.height - start.height) > 0.05  # a 1.93 m subject, a 1.68 m start body
-    clip = read_bvh(tmp_path / "poses.bvh")
+    assert abs(locked.height - online_run.start.height) > 0.05  # a 1.93 m subject, a 1.68 m start body
+    clip = read_bvh(out / "poses.bvh")
     names, parents, heads = locked.bone_names, locked.rig.parents, locked.rig.heads
-    assert len(clip) == 12
+    assert len(clip) == len(online_run.sink.frames) == 16
     for b in range(1, len(names)):
         np.testing.assert_allclose(clip.offsets[clip.joint_index(names[b])], 100.0 * (heads[b] - heads[parents[b]]),
                                    atol=1e-4, err_msg=names[b])
-    root = bvhio.readAsHierarchy(str(tmp_path / "poses.bvh"))
+    root = bvhio.readAsHierarchy(str(out / "poses.bvh"))
     joints = {joint.Name: joint for joint, _, _ in root.layout()}
-    first = json.loads((tmp_path / "poses.jsonl").read_text().splitlines()[0])
+    first = json.loads((out / "poses.jsonl").read_text().splitlines()[0])
     _, expected = forward_kinematics(locked.rig, np.array([first["bodies"][0]["pose"]]))
     to_bvh = bvh_transform(first)
     root.loadPose(0)
