@@ -79,7 +79,7 @@ def matched_bodies(first: Sequence[BodyResult], other: Sequence[BodyResult]) -> 
         return {}
     cost = mean_joint_distances(first, other)
     pairable = cost <= MATCH_M  # inf (no joint shared) is never pairable
-    pairable &= np.array([[same_facing(a, b) for b in other] for a in first]).reshape(pairable.shape)
+    pairable &= np.array([[same_facing(a, b) for b in other] for a in first], dtype=bool)
     rows, cols = linear_sum_assignment(np.where(pairable, cost, 1e6))  # an unpairable body takes no one's place
     return {int(i): other[j] for i, j in zip(rows, cols) if pairable[i, j]}
 

@@ -353,13 +353,14 @@ def online_run(tall_walk, tmp_path_factory):
     sink = ValidatingSink()
     with ExitStack() as stack:
         parts = open_parts(config, stack, out=str(out))
+        start = parts.body  # taken before the run, whatever the run does to the parts
         worker = Worker(lambda: open_source(uri), parts.pipeline, [sink, *parts.sinks], camera="test",
                         drop_stale=False, source_uri=uri, status_period_s=0.1, source=parts.source)
         before = worker.stats.personalisation
         worker.run()
         info = validate(info_message("test", body=parts.pipeline.tracker.body, body_spec=config.body,
                                      personalisation=parts.pipeline.personalisation))
-    return SimpleNamespace(sink=sink, parts=parts, start=parts.body, before=before, info=info, out=out)
+    return SimpleNamespace(sink=sink, parts=parts, start=start, before=before, info=info, out=out)
 
 
 @needs_assets
