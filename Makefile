@@ -1,4 +1,5 @@
-# swarmpose: `make demo` runs the main job, `make test` runs the tests.
+# swarmpose: `make demo` runs the main job, `make test` the fast tests (about 2 minutes),
+# `make test-all` every test (CI).
 # The first call installs what is missing: system libraries (apt-get, as root), the
 # virtual environment .venv and the package with its dependencies from PyPI.
 
@@ -7,7 +8,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint setup clean
+.PHONY: demo test test-all lint setup clean
 
 demo: $(STAMP)
 	$(BIN)/swarmpose demo
@@ -15,7 +16,12 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/ruff check service tests examples
 	$(BIN)/lint-imports
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -m "not slow"
+
+test-all: $(STAMP)
+	$(BIN)/ruff check service tests examples
+	$(BIN)/lint-imports
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile --durations=15
 
 lint: $(STAMP)
 	$(BIN)/ruff check service tests examples

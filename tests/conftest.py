@@ -13,6 +13,18 @@ ASSETS = SHARED / "assets"
 MAKEHUMAN = ASSETS / "bodies" / "makehuman"
 MOCAP = ASSETS / "mocap"
 
+UNREAD_MOCAP = ("cmu_02_06_", "cmu_06_10_", "cmu_09_01_", "cmu_10_01_", "cmu_14_31_", "cmu_135_04_")
+"""Clips of ``../shared/assets/mocap`` in skeleton families the BVH retargeting does not read yet: the
+Daz-named CMU release (hip, abdomen, lShldr, ...) and CMU's ASF names (pelvis, lfemur, lhumerus, ...)."""
+
+
+def mocap_param(path: Path):
+    """``pytest.param(path)``, expected to fail (strictly) when its family is one of :data:`UNREAD_MOCAP`."""
+    unread = path.name.startswith(UNREAD_MOCAP)
+    marks = pytest.mark.xfail(strict=True, reason="skeleton family not read yet (issue 53)") if unread else ()
+    return pytest.param(path, id=path.stem, marks=marks)
+
+
 MOVENET_COCO_BOUND_PX = 6.5
 """Median keypoint error bound (px) of MoveNet on the COCO photo (detector test and its benchmark)."""
 BLAZEPOSE_COCO_BOUND_PX = 8.5
@@ -131,3 +143,21 @@ class ValidatingSink:
 
     def close(self) -> None:
         """Nothing to release."""
+
+
+SLOW_FIXTURES = frozenset({"online_run", "regression", "walk_samples"})
+"""Fixtures that track a whole sequence or fit a shape: a test using one is in the slow tier too."""
+
+
+FIRST = "tests/docker/test_container.py"
+"""Run first: its image build waits mostly on downloads, which overlap the other tests under
+``make test-all``'s two workers (``-n 2 --dist loadfile``: one file stays on one worker)."""
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """Mark a test ``slow`` when it uses one of :data:`SLOW_FIXTURES` (``make test`` leaves those
+    out), and move :data:`FIRST`'s tests to the front."""
+    for item in items:
+        if SLOW_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.slow)
+    items.sort(key=lambda item: not item.nodeid.startswith(FIRST))  # stable: the rest keep their order

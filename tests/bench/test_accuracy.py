@@ -40,6 +40,7 @@ def regression(tmp_path_factory):
     return out, records
 
 
+@pytest.mark.slow
 @needs_assets
 def test_side_and_back_views_with_movenet_hold(regression):
     _, records = regression
@@ -96,6 +97,7 @@ def test_a_sequence_too_short_for_the_run_is_rendered_again(tmp_path):
     assert len(list((folder / "depth").glob("*.png"))) == 3
 
 
+@pytest.mark.slow
 @needs_assets
 def test_seeds_track_each_cell_again_and_the_table_shows_their_mean(regression):
     out, records = regression

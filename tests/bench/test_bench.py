@@ -9,6 +9,7 @@ import pytest
 from swarmpose.bench.score import bench_score, format_bench
 
 
+@pytest.mark.slow
 def test_bench_score_smoke():
     result = bench_score(particles=4, resolution=(16, 16), repeats=2, baseline_repeats=1, warmup=1, device="cpu",
                          lod=400)
@@ -22,6 +23,7 @@ def test_bench_score_smoke():
     assert "hypotheses/s" in format_bench(result)
 
 
+@pytest.mark.slow
 def test_bench_track_splits_the_search_and_scores_the_run(capsys):
     from swarmpose.cli.main import main
 

@@ -13,6 +13,7 @@ from swarmpose.pipeline.api import Tracker
 MOVENET = ASSETS / "pose2d" / "movenet_singlepose_lightning.onnx"
 
 
+@pytest.mark.slow
 @needs_assets
 def test_the_real_frames_are_read_with_their_depth_in_metres():
     frames = skeltrack_frames(ASSETS)
@@ -39,6 +40,7 @@ def test_montage_lays_images_out_in_a_grid():
     assert grid[0, 0, 0] == 0 and grid[0, 30, 0] == 1 and grid[40, 0, 0] == 4 and grid[40, 30, 0] == 0
 
 
+@pytest.mark.slow
 @needs_assets
 def test_an_upper_body_without_hips_in_view_is_tracked_from_its_shoulders():
     """Skeltrack frame 1 (hips out of the frame, the person about 1 m away): tracked; the
@@ -62,6 +64,7 @@ TWO_PEOPLE = ("depth-data-1399145206", "depth-data-82823944")
 """The Skeltrack frames that hold two people (the assets' README says two do; these are they, by eye)."""
 
 
+@pytest.mark.slow
 @needs_assets
 def test_both_people_of_the_two_person_skeltrack_frames_are_tracked_and_nobody_else():
     """The two Skeltrack frames that hold two people give two ids, the ten others one. In frame
@@ -96,6 +99,7 @@ def test_both_people_of_the_two_person_skeltrack_frames_are_tracked_and_nobody_e
     assert sum(on) >= 3, on
 
 
+@pytest.mark.slow
 @needs_assets
 def test_the_five_people_frame_gives_five_plausible_skeletons():
     """Real Kinect frame of five people walking away: each found in the depth, detected on its

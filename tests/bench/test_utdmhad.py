@@ -45,6 +45,7 @@ def test_offset_scores_remove_a_constant_per_joint_difference_learnt_on_the_othe
     assert records[0]["mpjpe_offset_mm"] == pytest.approx(by_hand)
 
 
+@pytest.mark.slow
 @needs_assets
 def test_the_benchmark_tracks_scores_and_resumes(tmp_path):
     tracker = {"particles": 8, "generations": 4}
@@ -79,6 +80,7 @@ def test_the_benchmark_tracks_scores_and_resumes(tmp_path):
             np.testing.assert_array_equal(data["truth"], UtdMhadSource(path, lag_frames=lag).ground_truth.joints3d[:4])
 
 
+@pytest.mark.slow
 @needs_assets
 def test_eval_runs_on_a_utdmhad_file_with_its_defaults(capsys):
     path = UTD / "depth" / "a23_s1_t1_depth.mat"
@@ -94,6 +96,7 @@ def test_eval_refuses_a_mat_file_that_is_not_utdmhad(tmp_path, capsys):
     assert "a1_s1_t1_depth.mat" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 @needs_assets
 def test_seeds_track_each_sequence_again_and_resume(tmp_path):
     """Two seeds: seed 0's files keep their names, seed 1's carry ``-seed1`` and the seed; the two

@@ -77,6 +77,7 @@ def test_tracking_bodies_follow_the_exact_surface(space, name):
     np.testing.assert_allclose(lod.point_rest, full.point_rest, atol=0.015)  # nose, ears: picked from the mesh
 
 
+@pytest.mark.slow
 def test_the_largest_shape_stays_close_on_average(space):
     x = vector(2.05, 1.5, 1.5, 1.5)
     lod, full = space.tracking_body(x), space.full_body(x)

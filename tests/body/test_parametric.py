@@ -51,6 +51,7 @@ def _floor_height(b, point: str) -> float:
 
 
 # ---------------------------------------------------------------------------- shape
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(BUILTIN_PRESETS))
 def test_every_preset_builds_at_its_height(name):
     shape = BUILTIN_PRESETS[name]
@@ -86,6 +87,7 @@ def _waist_area(b) -> float:
     return float(occ.sum() * step * step)
 
 
+@pytest.mark.slow
 def test_torso_girth_grows_the_waist():
     thin, base, thick = (build_parametric_body(BodyShape(torso_girth=g)) for g in (0.8, 1.0, 1.3))
     a_thin, a_base, a_thick = (_waist_area(b) for b in (thin, base, thick))

@@ -138,6 +138,7 @@ def _readable(out: Path) -> tuple[int, int, int, int]:
     return len(lines), len(rows) - 1, len(read_bvh(out / "poses.bvh")), video
 
 
+@pytest.mark.slow
 def test_sigterm_stops_track_with_every_file_closed_and_readable(wave_sequence, tmp_path):
     # track had no SIGTERM handler: Python died at once without closing its files; now the
     # frame in progress is finished and handed to every file, so all of them hold the same frames

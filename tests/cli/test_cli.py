@@ -7,6 +7,7 @@ import json
 import subprocess
 import sys
 
+import pytest
 from conftest import MAKEHUMAN, MOCAP, needs_assets
 
 from swarmpose.cli.main import main
@@ -24,22 +25,26 @@ def _assert_clean_error(proc: subprocess.CompletedProcess, *words: str) -> None:
         assert word in last, last
 
 
+@pytest.mark.slow
 def test_unknown_builtin_preset(tmp_path):
     proc = _run("synth", "--shape", "giant", "--motion", "builtin:wave", "--frames", "1", "--out", str(tmp_path))
     _assert_clean_error(proc, "giant", "default")
 
 
+@pytest.mark.slow
 def test_unknown_builtin_motion(tmp_path):
     proc = _run("synth", "--motion", "builtin:moonwalk", "--frames", "1", "--out", str(tmp_path))
     _assert_clean_error(proc, "moonwalk", "wave")
 
 
+@pytest.mark.slow
 def test_missing_makehuman_directory(tmp_path):
     proc = _run("synth", "--body", f"makehuman:{tmp_path / 'nowhere'}", "--motion", "builtin:wave", "--frames", "1",
                 "--out", str(tmp_path / "out"))
     _assert_clean_error(proc, "nowhere", "base.obj")
 
 
+@pytest.mark.slow
 def test_missing_and_foreign_bvh(tmp_path):
     _assert_clean_error(_run("synth", "--motion", str(tmp_path / "none.bvh"), "--frames", "1", "--out", str(tmp_path)),
                         "none.bvh")
@@ -50,6 +55,7 @@ def test_missing_and_foreign_bvh(tmp_path):
                         "unknown BVH skeleton")
 
 
+@pytest.mark.slow
 def test_unwritable_output(tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
@@ -57,6 +63,7 @@ def test_unwritable_output(tmp_path):
     _assert_clean_error(proc, str(blocker / "seq"), "--out")
 
 
+@pytest.mark.slow
 def test_bad_flags_exit_2():
     assert _run("synth", "--motion", "builtin:wave", "--frames", "0", "--out", "x").returncode == 2
     assert _run("synth", "--frames", "3", "--out", "x").returncode == 2  # --motion missing
@@ -64,6 +71,7 @@ def test_bad_flags_exit_2():
                              "--camera-distance", "50"), "--camera-distance")
 
 
+@pytest.mark.slow
 @needs_assets
 def test_out_of_range_numbers_are_clean_errors(tmp_path):
     base = ("synth", "--motion", "builtin:wave", "--frames", "1", "--out", str(tmp_path / "x"))
@@ -74,6 +82,7 @@ def test_out_of_range_numbers_are_clean_errors(tmp_path):
     assert not (tmp_path / "x" / "groundtruth.jsonl").exists()
 
 
+@pytest.mark.slow
 @needs_assets
 def test_more_frames_than_the_clip_has(tmp_path):
     proc = _run("synth", "--motion", str(MOCAP / "makehuman_walk1.bvh"), "--frames", "500", "--out", str(tmp_path))
@@ -96,6 +105,7 @@ def test_makehuman_preset_exported_to_glb_reloads(tmp_path, capsys):
     assert info["vertices"] == 13380 and abs(info["height_m"] - 1.748) < 0.01
 
 
+@pytest.mark.slow
 def test_demo_writes_a_sequence_and_tracks_it(tmp_path, capsys):
     args = ["demo", "--out", str(tmp_path / "demo"), "--frames", "3", "--particles", "12", "--generations", "8"]
     assert main(args + ["--quiet"]) == 0
@@ -110,6 +120,7 @@ def test_demo_writes_a_sequence_and_tracks_it(tmp_path, capsys):
         assert (tmp_path / "replay" / name).stat().st_size > 0
 
 
+@pytest.mark.slow
 def test_demo_with_a_replay_file_that_cannot_be_written_exits_1_keeping_the_rest(tmp_path, capsys):
     replay = tmp_path / "replay"
     replay.mkdir()
@@ -123,6 +134,7 @@ def test_demo_with_a_replay_file_that_cannot_be_written_exits_1_keeping_the_rest
     assert [int(r["frame"]) for r in csv.DictReader((replay / "poses.csv").open())] == [0, 1, 2]
 
 
+@pytest.mark.slow
 def test_bench_score_json_has_the_documented_keys(capsys):
     assert main(["bench", "score", "--particles", "4", "--resolution", "16x16", "--repeats", "2", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
@@ -133,6 +145,7 @@ def test_bench_score_json_has_the_documented_keys(capsys):
     assert _run("bench", "score", "--resolution", "64by64").returncode == 2
 
 
+@pytest.mark.slow
 def test_bench_name_lists_default_to_the_values_their_help_shows():
     """The comma-separated bench options parse their defaults as a typed value would (a tuple of
     names), and their help shows the names as one would type them, not a tuple's repr."""

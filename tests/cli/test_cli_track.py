@@ -42,6 +42,7 @@ def sequence(tmp_path_factory) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_track_writes_one_line_per_frame(sequence, tmp_path, capsys):
     assert main(["track", str(sequence), "--out", str(tmp_path)] + FAST) == 0
     lines = [validate(json.loads(x)) for x in (tmp_path / "poses.jsonl").read_text().splitlines()]
@@ -54,6 +55,7 @@ def test_track_writes_one_line_per_frame(sequence, tmp_path, capsys):
     assert "tracked 5 frames" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_eval_json_matches_an_independent_error(sequence, tmp_path, capsys):
     out = tmp_path / "poses.jsonl"
     plot = tmp_path / "a.png"
@@ -72,6 +74,7 @@ def test_eval_json_matches_an_independent_error(sequence, tmp_path, capsys):
     assert plot.stat().st_size > 1000
 
 
+@pytest.mark.slow
 def test_damaged_sequence_is_reported_and_tracking_goes_on(sequence, tmp_path, capsys):
     broken = tmp_path / "broken"
     shutil.copytree(sequence, broken)

@@ -100,6 +100,7 @@ def test_bad_files_name_the_file_and_the_key(tmp_path):
         read_toml(typed, ServiceConfig)
 
 
+@pytest.mark.slow
 def test_serve_with_a_broken_config_or_no_source_exits_2(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("camera_id = 'a b'\n")

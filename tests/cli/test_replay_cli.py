@@ -26,6 +26,7 @@ FAST = ["--particles", "12", "--generations", "8", "--quiet"]
 BIN = Path(sys.executable).parent
 
 
+@pytest.mark.slow
 def test_replay_writes_every_output_and_scores_it(wave_sequence, tmp_path, capsys):
     out = tmp_path / "replay"
     assert main(["replay", "--source", str(wave_sequence), "--out", str(out), "--json"] + FAST) == 0
@@ -59,6 +60,7 @@ def test_replay_of_a_damaged_recording_reports_and_goes_on(wave_sequence, tmp_pa
     assert result["skipped"] == 1 and result["coverage"] < 1.0 and not (out / "overlay.mp4").exists()
 
 
+@pytest.mark.slow
 def test_replay_bad_input_exits_2_naming_it(wave_sequence, tmp_path, capsys):
     blocker = tmp_path / "file"
     blocker.write_text("x")
@@ -74,6 +76,7 @@ def test_replay_bad_input_exits_2_naming_it(wave_sequence, tmp_path, capsys):
     assert run.returncode == 2 and "--out" in run.stderr
 
 
+@pytest.mark.slow
 def test_serve_with_the_example_subscriber_beside_it(wave_sequence, tmp_path):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     health = tmp_path / "status.json"
@@ -112,6 +115,7 @@ def test_replay_with_an_output_that_fails_every_frame_reports_it_once_and_exits_
     assert len(read_bvh(out / "poses.bvh")) == 6
 
 
+@pytest.mark.slow
 def test_replay_stopped_by_a_signal_exits_130_keeping_what_it_tracked(wave_sequence, tmp_path):
     out = tmp_path / "out"
     replay = subprocess.Popen([str(BIN / "swarmpose"), "replay", str(wave_sequence), "--out", str(out), "--mode",
@@ -131,6 +135,7 @@ def test_replay_stopped_by_a_signal_exits_130_keeping_what_it_tracked(wave_seque
     assert 1 <= len(frames) < 6 and frames == list(range(len(frames)))
 
 
+@pytest.mark.slow
 def test_replay_offers_no_flags_it_would_ignore(wave_sequence, tmp_path, capsys):
     for flag in (["--loop"], ["--record", str(tmp_path / "r")]):
         with pytest.raises(SystemExit) as exit_:

@@ -140,6 +140,7 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
     return float((a & b).sum() / (a | b).sum())
 
 
+@pytest.mark.slow
 def test_synthetic_views_give_one_person_with_the_true_silhouette_and_height(walk_frames):
     for frame in walk_frames:
         seg = segment_people(frame.depth, frame.intrinsics)

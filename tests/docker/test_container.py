@@ -40,6 +40,7 @@ CANNOT_RUN = "podman cannot run a container here"
 """What scripts/build-image.sh says when no container can be started on this machine."""
 
 pytestmark = [
+    pytest.mark.slow,
     pytest.mark.skipif(PODMAN is None, reason="podman is not installed (as root, scripts/install-system-deps.sh "
                                               "installs it: apt-get install podman)"),
     pytest.mark.skipif(os.geteuid() != 0, reason="the container test runs podman as root, and this is not root"),

@@ -75,6 +75,7 @@ def test_build_is_memoised_per_context_bounded_and_failures_carry_the_log():
     assert "ZATOMIC" in err.log and err.device in str(err)
 
 
+@pytest.mark.slow
 def test_the_program_cache_is_bounded():
     ctx = ClContext(choose_device("cpu"))
     sizes = {"NV": 3, "NF": 1, "NB": 1, "TW": 8, "TH": 8, "WG": 1, "ZATOMIC": 0, "CULL": 1, "ZNEAR": 0.05,

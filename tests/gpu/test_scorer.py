@@ -160,6 +160,7 @@ def rigid_mesh(body, verts: np.ndarray, tris: np.ndarray):
     return flat, h
 
 
+@pytest.mark.slow
 def test_fill_rule_is_exact_on_pixel_centres(builtin_body):
     """A flat grid whose edges (including diagonals) pass exactly through pixel centres:
     no cracks inside, and the outline is covered as a half-open pixel set."""
@@ -345,6 +346,7 @@ def test_bad_construction(builtin_body):
         ParticleScorer(builtin_body, INTR, (16, 16), threshold=0.0, context="cpu")
 
 
+@pytest.mark.slow
 def test_work_group_variants_agree(builtin_body, seed):
     """The GPU-style layout (many work-items per particle, atomic z-buffer) and the scalar
     reduction (tile width not a multiple of 8) give the CPU layout's results."""
@@ -371,6 +373,7 @@ def test_work_group_variants_agree(builtin_body, seed):
             np.testing.assert_allclose(sums, results[0][1], rtol=1e-5)
 
 
+@pytest.mark.slow
 def test_vector_raster_is_bit_identical(body, seed):
     """The CPU layout's vector lanes (8 triangles set up at a time, rows 8 pixels at a time)
     draw exactly the z-buffer of the one-triangle-at-a-time path: on random poses, a box that

@@ -7,11 +7,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import MOCAP, mocap_param
 
 from swarmpose.core.errors import MotionError
 from swarmpose.motion.bvh import BvhClip, read_bvh, slerp
-
-MOCAP = Path(__file__).resolve().parents[2].parent / "shared/assets/mocap"
 
 # Elementary 90-degree rotations, written out by hand (column vectors, right-handed).
 RX90 = np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], dtype=float)
@@ -277,6 +276,7 @@ ASSET_FILES = sorted(MOCAP.glob("*.bvh")) if MOCAP.is_dir() else []
 ASSET_PARAMS = [pytest.param(p, id=p.stem) for p in ASSET_FILES] or [
     pytest.param(None, marks=pytest.mark.skip(reason=f"mocap assets not found at {MOCAP} "
                                               "(clone the project next to its shared/ folder)"))]
+FAMILY_PARAMS = [mocap_param(p) for p in ASSET_FILES] or ASSET_PARAMS
 
 # (shoulder, elbow, wrist, hip, knee, ankle) joint names of each skeleton family.
 FAMILIES = (
@@ -311,7 +311,7 @@ def test_asset_parses_completely(path):
     assert np.all(np.isfinite(pos))
 
 
-@pytest.mark.parametrize("path", ASSET_PARAMS)
+@pytest.mark.parametrize("path", FAMILY_PARAMS)
 def test_asset_skeleton_is_human_shaped(path):
     clip = read_bvh(path)
     family = next((f for f in FAMILIES if all(n in clip.joint_names for n in f)), None)

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import MAKEHUMAN, MOCAP, needs_assets
+from conftest import MAKEHUMAN, MOCAP, mocap_param, needs_assets
 
 from swarmpose.core.errors import MotionError
 
 pytestmark = needs_assets
 
-CLIPS = sorted(p.name for p in MOCAP.glob("*.bvh")) if MOCAP.is_dir() else []
+CLIPS = [mocap_param(p) for p in sorted(MOCAP.glob("*.bvh"))] if MOCAP.is_dir() else []
 POINTS = ["left_shoulder", "left_elbow", "left_wrist", "left_hip", "left_knee", "left_ankle", "neck", "mid_hip",
           "right_shoulder", "right_elbow", "right_wrist", "right_hip", "right_knee", "right_ankle"]
 
@@ -50,7 +50,7 @@ def test_clip_retargets_with_matching_joint_angles(body, clip_name):
     from swarmpose.motion.bvh import read_bvh
     from swarmpose.motion.retarget import _Roles, retarget
 
-    clip = read_bvh(MOCAP / clip_name).resample(30.0)
+    clip = read_bvh(clip_name).resample(30.0)
     motion = retarget(clip, body)
     assert len(motion) == len(clip) and motion.within_limits()
     assert np.all(np.isfinite(motion.angles)) and np.all(np.isfinite(motion.root_offset))

@@ -24,6 +24,7 @@ REPO = Path(__file__).resolve().parents[2]
 FAST = {"particles": 16, "generations": 12}
 
 
+@pytest.mark.slow
 def test_the_example_program_tracks_a_synthetic_sequence(wave_sequence):
     run = subprocess.run([sys.executable, str(REPO / "examples" / "track_my_camera.py"), str(wave_sequence),
                           "--frames", "4", "--particles", "16", "--generations", "12", "--json"],
@@ -37,6 +38,7 @@ def test_the_example_program_tracks_a_synthetic_sequence(wave_sequence):
     assert 1000 * np.linalg.norm(est - gt.joints3d[:4], axis=2).mean() < 80
 
 
+@pytest.mark.slow
 def test_track_gives_what_the_command_line_writes(wave_sequence, tmp_path):
     """swarmpose.track and `swarmpose track` run the same per-frame step: same poses, same messages."""
     api = list(swarmpose.track(f"folder:{wave_sequence}", detector="simulated", frames=4, **FAST))
@@ -54,6 +56,7 @@ def test_track_gives_what_the_command_line_writes(wave_sequence, tmp_path):
         assert 0.0 <= wrist.confidence <= 1.0 and wrist.pixel.shape == (2,)
 
 
+@pytest.mark.slow
 def test_tracker_on_arrays_follows_the_ground_truth(wave_sequence):
     source = swarmpose.open_source(f"folder:{wave_sequence}")
     frames = [f for f in source if isinstance(f, swarmpose.Frame)]
@@ -101,6 +104,7 @@ def test_import_is_light_and_the_package_logs_nowhere_by_default():
     assert sorted(swarmpose.__all__) == swarmpose.__all__ and "Tracker" in dir(swarmpose)
 
 
+@pytest.mark.slow
 def test_subscribe_has_normal_flags_and_help():
     run = subprocess.run([sys.executable, "-m", "swarmpose", "subscribe", "--help"], capture_output=True, text=True,
                          timeout=60)

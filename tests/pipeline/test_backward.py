@@ -36,6 +36,7 @@ def _errors_mm(folder: Path, run) -> np.ndarray:
                      for r in run])
 
 
+@pytest.mark.slow
 def test_the_backward_pass_removes_the_starts_settling_from_a_side_view(side_wave):
     forward = list(swarmpose.track(f"folder:{side_wave}", detector="simulated", **SMALL))
     both = list(swarmpose.track(f"folder:{side_wave}", detector="simulated", backward=20, **SMALL))
@@ -47,6 +48,7 @@ def test_the_backward_pass_removes_the_starts_settling_from_a_side_view(side_wav
     assert behind[-1] == ahead[-1]  # the window's last frame is the backward pass's start, kept as it was
 
 
+@pytest.mark.slow
 def test_each_window_is_the_tracker_run_backwards_from_the_windows_last_solution(side_wave):
     """A backward pass made by hand with a BodyTracker on the source's frames and the forward
     run's detections gives each frame's refit pose exactly."""
@@ -73,6 +75,7 @@ def test_each_window_is_the_tracker_run_backwards_from_the_windows_last_solution
             assert "backward" in both[k].timings_ms
 
 
+@pytest.mark.slow
 def test_with_several_people_each_id_is_refit_on_its_own_frames(two_people):
     settings = {"particles": 16, "generations": 12, "max_people": 3, "auto_height": False, "frames": 6}
     forward = list(swarmpose.track(f"folder:{two_people}", detector="simulated", **settings))
@@ -117,6 +120,7 @@ def test_a_stopped_run_hands_on_the_frames_it_held(wave_sequence):
     assert all("backward" not in m["timings_ms"] for m in got)  # promptly: with their forward fits
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("offline", [{"backward": 10}, {"smoothing": "centred"},
                                      {"backward": 10, "smoothing": "centred"}])
 def test_a_source_that_breaks_hands_on_the_frames_held_as_found_then_raises(wave_sequence, offline):
@@ -213,6 +217,7 @@ def test_a_step_keeps_the_body_its_tracker_had_then(wave_sequence):
     assert held.steps[0].body.height == pytest.approx(1.1 * tracker.given_body.height, rel=1e-6)
 
 
+@pytest.mark.slow
 def test_a_person_whose_backward_run_fails_keeps_the_forward_fits_and_it_is_logged(wave_sequence, caplog):
     from dataclasses import replace
 

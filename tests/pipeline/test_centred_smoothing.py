@@ -210,6 +210,7 @@ def test_a_sigma_of_zero_is_refused():
         CentredSmoother(0.0)
 
 
+@pytest.mark.slow
 def test_a_tracked_run_publishes_the_smoothed_poses_of_the_same_track(side_wave, body):
     settings = {"particles": 16, "generations": 12, "max_people": 1, "auto_height": False}
     found = list(swarmpose.track(f"folder:{side_wave}", detector="simulated", **settings))
@@ -244,6 +245,7 @@ def test_live_commands_refuse_it_and_name_what_to_run(wave_sequence, tmp_path, c
     assert TrackerConfig(backward=5, smoothing="centred").centred_sigma_s == SIGMA_S  # runs after the backward pass
 
 
+@pytest.mark.slow
 def test_personalize_collects_its_samples_with_the_offline_settings(side_wave):
     """``personalize --smoothing centred`` (and ``--backward N``) apply to the poses its fit starts
     from: the samples' poses are those a smoothed run of the same start body publishes."""
@@ -272,6 +274,7 @@ def test_the_lift_mode_has_no_pose_to_smooth_and_refuses_it():
         TrackerConfig(mode="lift", smoothing="centred")
 
 
+@pytest.mark.slow
 def test_after_the_backward_pass_each_frame_is_fitted_with_the_body_it_was_refit_with(tmp_path):
     """A 1.9 m person: the automatic height locks a body scaled to them in the middle of the window, and
     the backward pass refits the whole window with it, so every published pose, smoothed, is that
@@ -294,6 +297,7 @@ def test_after_the_backward_pass_each_frame_is_fitted_with_the_body_it_was_refit
         assert np.allclose(b.joints3d, final.posed_points(b.pose[None], EVAL_JOINTS)[0], atol=1e-6), r.index
 
 
+@pytest.mark.slow
 def test_with_several_people_each_id_is_smoothed_on_its_own_track(two_people):
     folder = two_people
     settings = {"particles": 16, "generations": 12, "max_people": 3, "auto_height": False}

@@ -85,6 +85,7 @@ def _mean_error_mm(folder, run) -> float:
                           for r in run]))
 
 
+@pytest.mark.slow
 def test_a_run_publishes_the_first_tracks_people_at_the_mean_of_the_tracks_made_one_by_one(side_wave):
     """Each member tracks as it would alone (the seeded search repeats exactly): the published joints
     come within the inverse kinematics' reach of the weighted mean of the runs made with seeds 0 and 1,
@@ -107,6 +108,7 @@ def test_a_run_publishes_the_first_tracks_people_at_the_mean_of_the_tracks_made_
     assert errors[2] <= max(errors[:2]) + 3.0, errors
 
 
+@pytest.mark.slow
 def test_with_several_people_each_keeps_the_first_tracks_id(two_people):
     settings = {"particles": 16, "generations": 12, "max_people": 3, "auto_height": False, "frames": 5}
     first = list(swarmpose.track(f"folder:{two_people}", detector="simulated", **settings))
@@ -130,6 +132,7 @@ def test_an_ensemble_of_one_is_refused():
         EnsemblePipeline([object()])
 
 
+@pytest.mark.slow
 def test_track_writes_the_averaged_and_smoothed_poses_and_keeps_the_search_result(wave_sequence, tmp_path):
     """``track --ensemble 2 --smoothing centred``: every frame written; what a published body calls
     its search result is the first track's own (the run made with seed 0 alone)."""

@@ -44,6 +44,7 @@ def _tracked(results) -> dict[int, dict[int, np.ndarray]]:
     return {r.index: {b.id: body_joints(b.to_message()) for b in r.bodies if b.state != "lost"} for r in results}
 
 
+@pytest.mark.slow
 def test_three_people_get_three_stable_ids_and_fits_near_their_truth(three):
     results = list(swarmpose.track(f"folder:{three}", detector="simulated", max_people=4, particles=24,
                                    generations=24))
@@ -57,6 +58,7 @@ def test_three_people_get_three_stable_ids_and_fits_near_their_truth(three):
         assert s["mpjpe_mm"] < 120, f"person {person}: {s['mpjpe_mm']:.0f} mm"
 
 
+@pytest.mark.slow
 def test_max_people_caps_the_tracks_and_counts_the_rest(three):
     source = FolderSource(three)
     with swarmpose.Tracker(detector="simulated", source=source, max_people=2, particles=8, generations=8,
@@ -68,6 +70,7 @@ def test_max_people_caps_the_tracks_and_counts_the_rest(three):
     assert counts.created == 2
 
 
+@pytest.mark.slow
 def test_one_person_in_view_is_tracked_as_before(wave_sequence):
     single = list(swarmpose.track(f"folder:{wave_sequence}", detector="simulated", max_people=1, particles=16,
                                   generations=16, frames=3))

@@ -111,6 +111,7 @@ def test_replay_publishes_every_frame_in_order_with_valid_messages(wave_sequence
     assert last["state"] == "source-ended" and last["frames"]["published"] == 6 and sink.closed == 1
 
 
+@pytest.mark.slow
 def test_replay_latency_is_the_processing_time_not_the_queue(wave_sequence, body):
     """Frames queue behind each other in replay; the latency leaves that out (tracking time + detection)."""
     sink = Collect()
@@ -145,6 +146,7 @@ class FlakyDetector:
         self.inner.close()
 
 
+@pytest.mark.slow
 def test_a_detector_that_throws_is_reported_and_the_frame_still_tracked(wave_sequence, body):
     source = open_source(f"folder:{wave_sequence}")
     detector = FlakyDetector(make_detector("simulated", source), {2})
@@ -252,6 +254,7 @@ def test_a_failing_sink_is_reported_once_dropped_and_the_others_go_on(wave_seque
     assert good.statuses[-1]["state"] == "source-ended"
 
 
+@pytest.mark.slow
 def test_stop_ends_a_running_worker_promptly(wave_sequence, body):
     sink = Collect()
     worker = make_worker(wave_sequence, body, [sink], SMALL, drop_stale=True, pace_fps=2.0, loop=True)

@@ -259,6 +259,7 @@ def world_run(wave_sequence, tmp_path_factory):
     return run(wave_sequence, tmp_path_factory.mktemp("world"), coordinates="world")
 
 
+@pytest.mark.slow
 def test_world_joints_are_the_camera_joints_moved_onto_the_fitted_floor(world_run, wave_sequence):
     parts, got = world_run
     state = parts.pipeline.world.state
@@ -331,6 +332,7 @@ def test_the_bvh_stands_upright_on_the_floor_at_the_pelvis_height(world_run):
     assert np.all(head_y > 150)  # cm above the floor
 
 
+@pytest.mark.slow
 def test_given_extrinsics_put_the_joints_in_the_renderers_world(wave_sequence, tmp_path):
     truth_t = true_camera_to_world(wave_sequence)
     extrinsics = write(tmp_path / "camera.json", {"camera_to_world": truth_t.tolist()})

@@ -108,6 +108,7 @@ def check_depth(rows: dict[str, list[dict]], sequence: Path, frames: list[int]) 
         np.testing.assert_array_equal(np.asarray(colors[f], dtype=np.uint32), packed)
 
 
+@pytest.mark.slow
 def test_track_rrd_holds_every_frame_the_depth_and_the_message_values(tracked):
     sequence, out, rrd = tracked
     rows = read_rrd(rrd)
@@ -132,6 +133,7 @@ def test_track_rrd_holds_every_frame_the_depth_and_the_message_values(tracked):
     assert states[0] == "person 0: init" and "person 0: tracking" in states
 
 
+@pytest.mark.slow
 def test_replay_writes_the_rrd_named_by_the_environment(wave_sequence, tmp_path, monkeypatch):
     """replay runs the sinks on the worker's thread; SWARMPOSE_RRD is the setting's variable."""
     rrd = tmp_path / "replay.rrd"
@@ -144,6 +146,7 @@ def test_replay_writes_the_rrd_named_by_the_environment(wave_sequence, tmp_path,
     assert any("worker" in r["TextLog:text"][0] for r in rows["/log"])
 
 
+@pytest.mark.slow
 def test_view_of_a_track_folder_writes_the_same_recording(tracked, tmp_path):
     sequence, out, _ = tracked
     rrd = tmp_path / "view.rrd"
@@ -263,6 +266,7 @@ def received_all(path: Path, frames: int = 6) -> bool:
                for e in ("/world/camera/depth", "/world/bodies/0/joints"))
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore:RRD file has no footer")
 def test_a_headless_view_is_served_to_a_remote_viewer(tracked, tmp_path):
     """Without a display, `swarmpose view` serves the recording over gRPC; rerun's own client

@@ -7,11 +7,13 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 from conftest import free_port
 
 BIN = Path(sys.executable).parent
 
 
+@pytest.mark.slow
 def test_the_subscriber_exits_when_the_worker_ends_and_keeps_waiting_with_forever(wave_sequence, tmp_path):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     env = {"PATH": str(BIN), "HOME": str(tmp_path)}

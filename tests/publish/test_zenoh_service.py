@@ -217,6 +217,7 @@ def test_the_client_api_delivers_by_iterator_and_callback(wave_sequence, body):
         sink.close()
 
 
+@pytest.mark.slow
 def test_a_client_rejects_a_message_that_breaks_the_schema():
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     pub = plain_session(listen=endpoint)
@@ -329,6 +330,7 @@ def test_peer_mode_with_an_unreachable_connect_endpoint_warns():
         sink.close()
 
 
+@pytest.mark.slow
 def test_serve_configured_by_environment_publishes_and_stops_on_sigterm(wave_sequence, tmp_path):
     """The docker entry point (`swarmpose serve`, settings from SWARMPOSE_*), run outside docker."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"

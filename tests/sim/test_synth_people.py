@@ -119,6 +119,7 @@ def test_people_start_where_asked_stand_on_the_floor_and_face_their_yaw(scene):
     np.testing.assert_allclose(world, expected, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_rendered_depth_at_unoccluded_joints_is_the_persons_own_surface(scene):
     """Where a joint is not hidden by someone else, the noisy depth image shows the surface of
     that person's mesh cast alone (noise: ~2.6 cm disparity steps at 3 m)."""
@@ -369,6 +370,7 @@ def test_cli_scene_file_equals_person_flags_and_bad_specs_exit_2(tmp_path, capsy
     assert "needs --motion" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 @needs_assets
 def test_makehuman_walkers_cross_from_real_mocap(tmp_path):
     """Two MakeHuman walkers (CMU clip from 4.5 s, turned ±90°) cross in front of each other."""

@@ -172,6 +172,7 @@ def test_recording_plays_back_frame_for_frame(recording):
     assert np.all(np.diff(depth_ids) == 1) and np.all(np.diff(color_ids) == 1)
 
 
+@pytest.mark.slow
 def test_player_defect_without_the_cropping_property(recording):
     """The untouched Dummy recording opens but Debian's player delivers no frame: a clear error."""
     raw, _ = recording

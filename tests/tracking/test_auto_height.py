@@ -42,6 +42,7 @@ def test_it_applies_only_to_a_body_whose_shape_was_not_given():
     assert not applies("builtin", "", TrackerConfig(mode="lift"))  # no body to scale
 
 
+@pytest.mark.slow
 def test_a_tracker_finds_a_short_subjects_height_and_tracks_better_for_it(tmp_path, capsys):
     """A 1.55 m built-in subject walking, tracked by the default 1.75 m body: the height found is
     the subject's within 3 cm (oracle: the synthesised body's own stature), and the joints are
@@ -83,6 +84,7 @@ def test_a_tracker_finds_a_short_subjects_height_and_tracks_better_for_it(tmp_pa
     source.close()
 
 
+@pytest.mark.slow
 def test_the_bvh_animates_the_scaled_body(tmp_path):
     """`eval --out DIR` with the automatic height: poses.bvh's offsets are the bones of the body
     the tracker scaled (oracle: the given body's rig times the factor the tracker reports), and
@@ -127,6 +129,7 @@ def test_the_bvh_animates_the_scaled_body(tmp_path):
                                atol=0.05)
 
 
+@pytest.mark.slow
 def test_status_and_info_report_the_height_as_a_personalisation(tmp_path, capsys):
     """A worker run of a 1.55 m built-in subject with the default body: the statuses (valid
     against the schemas) go from collecting to locked, with the scale applied and the body's

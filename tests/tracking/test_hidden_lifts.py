@@ -61,6 +61,7 @@ def _lift_in_front_m(body, pose: np.ndarray, targets: JointTargets) -> dict[str,
             for n, t in zip(names, true)}
 
 
+@pytest.mark.slow
 def test_the_far_limbs_lifted_onto_the_torso_leave_the_3d_term(body, side_walk):
     """With the true pose as the previous solution: every lift the rule drops lies well in front of
     its true joint (it measured an occluder), and most lifts more than 15 cm in front are dropped (the
@@ -104,6 +105,7 @@ def test_a_lift_of_something_in_front_of_the_models_occluder_is_kept(body, side_
     pytest.fail("no frame of the side walk had a hidden limb joint")
 
 
+@pytest.mark.slow
 def test_the_tracker_finds_the_far_arm_better_with_the_rule(side_walk):
     """The side walk tracked with and without the rule (simulated detector, PSO seeds 0-4; one seed's
     far arm moves by 90 mm between seeds, so the means are compared): the far arm's elbow and wrist

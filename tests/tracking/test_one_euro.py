@@ -108,6 +108,7 @@ def wave(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_the_tracker_publishes_filtered_poses_and_searches_unfiltered(wave):
     """With --smoothing one-euro the search's solutions are those of an unsmoothed run (same
     seed), and so is the detector's next box; the published poses are the One-Euro filter of

@@ -66,6 +66,7 @@ def female_walk(tmp_path_factory):
     return makehuman_walk(tmp_path_factory, "female", 12)
 
 
+@pytest.mark.slow
 @needs_assets
 @pytest.mark.parametrize("wrong", ["female-muscular", "female-slim"])
 def test_with_poses_of_its_own_the_true_shape_beats_the_shape_the_poses_were_tracked_with(female_walk, wrong):

@@ -175,6 +175,7 @@ def test_model_depth_is_the_first_hit_of_each_pixel_ray():
         assert depth[row, col] == pytest.approx(_first_hit_z(ray, verts, np.asarray(body.triangles)), abs=1e-4)
 
 
+@pytest.mark.slow
 @needs_assets
 def test_lift_bias_on_the_model_is_the_lifts_own_lengthening_on_the_observed_frames(tall_walk):
     """Oracle: the ground-truth 2D joints of a synthetic walk lifted on its observed (noisy) depth
@@ -268,6 +269,7 @@ def test_a_body_larger_than_the_person_costs_more_where_the_sensor_sees_the_wall
     assert heavier > own + 5.0, (own, heavier)  # measured: 533.7 against 544.1; with the old E_S 531.1 against 532.4
 
 
+@pytest.mark.slow
 @needs_assets
 def test_personalize_recovers_a_tall_subjects_height_and_writes_a_body_that_loads(tall_walk, tmp_path, capsys):
     """The start body is 1.68 m; the subject 1.93 m. On this test's small budget (16 frames,
@@ -300,6 +302,7 @@ def test_personalize_recovers_a_tall_subjects_height_and_writes_a_body_that_load
     assert report["own_pose_shapes_judged"] >= 5  # the last stage ran a round: 5 sliders, each moved one way at least
 
 
+@pytest.mark.slow
 @needs_assets
 def test_personalize_own_pose_candidates_0_skips_the_last_stage(tall_walk, tmp_path, capsys):
     from swarmpose.cli.main import main
@@ -310,6 +313,7 @@ def test_personalize_own_pose_candidates_0_skips_the_last_stage(tall_walk, tmp_p
     assert json.loads(capsys.readouterr().out)["own_pose_shapes_judged"] == 0
 
 
+@pytest.mark.slow
 @needs_assets
 def test_personalize_refuses_a_fixed_body_and_a_recording_without_a_person(tall_walk, tmp_path, capsys):
     from swarmpose.cli.main import main
@@ -363,6 +367,7 @@ def online_run(tall_walk, tmp_path_factory):
     return SimpleNamespace(sink=sink, parts=parts, start=start, before=before, info=info, out=out)
 
 
+@pytest.mark.slow
 @needs_assets
 def test_personalize_n_locks_each_bodys_shape_online_and_status_and_info_say_so(online_run):
     """`--personalize 10` on a worker run: statuses go from collecting to locked with the fitted
@@ -414,6 +419,7 @@ def test_personalize_n_writes_the_bvh_of_the_locked_body(online_run):
     np.testing.assert_allclose(got, 100.0 * (expected[0] @ to_bvh[:3, :3].T + to_bvh[:3, 3]), atol=0.05)
 
 
+@pytest.mark.slow
 def test_personalize_fits_the_builtin_bodys_height_and_girths(tmp_path, capsys):
     """A built-in male-heavy subject (1.78 m, torso girth 1.35, arms and legs 1.25) from the
     average built-in body (1.75 m, girths 1.0): height within 4 cm and every girth found
@@ -479,6 +485,7 @@ def test_a_failed_fit_is_reported_valid_and_a_new_person_starts_again_from_the_s
     np.testing.assert_allclose(tracker.objective.scorer.body.vertices, tracker.body.vertices)
 
 
+@pytest.mark.slow
 @needs_assets
 def test_with_other_people_in_view_a_frame_whose_person_is_half_hidden_is_not_collected(tall_walk):
     """Oracle: the walk's own depth with the person's pixels below the hips removed (as another

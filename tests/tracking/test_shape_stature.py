@@ -48,6 +48,7 @@ def walk_samples(tmp_path_factory):
     return samples, tracker.body, load_body(f"makehuman:{MAKEHUMAN}", "female-slim"), source.intrinsics
 
 
+@pytest.mark.slow
 def test_the_measured_stature_bounds_the_subjects_height(walk_samples):
     """Oracle: the subject's true height lies inside the term's band around the median stature
     measured at the tracked samples (the tracking body only says where to look: it is 15 cm taller),

@@ -104,6 +104,7 @@ def _scene_depth(subject, pose: np.ndarray, wall_m: float | None, plate: bool = 
     return np.where(np.isfinite(hit), hit, 0.0).astype(np.float32)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("height", [1.50, 1.62, 1.95])
 @pytest.mark.parametrize("wall_m", [None, 0.8])
 def test_the_stature_is_the_subjects_with_and_without_a_room(height, wall_m):

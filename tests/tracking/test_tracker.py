@@ -62,6 +62,7 @@ def errors_mm(results, folder: Path) -> np.ndarray:
     return 1000 * np.linalg.norm(np.array([r.joints3d for r in results]) - gt.joints3d, axis=2)
 
 
+@pytest.mark.slow
 def test_hybrid_tracks_the_walk_without_initialisation(body, sequence):
     results = track(body, sequence)
     assert [r.state for r in results] == ["init"] + ["tracking"] * (FRAMES - 1)
@@ -75,12 +76,14 @@ def test_hybrid_tracks_the_walk_without_initialisation(body, sequence):
     assert set(results[-1].objective) == {"E", "E_D", "E_J", "E_J2D", "E_J3D", "E_P", "E_A"}
 
 
+@pytest.mark.slow
 def test_seeded_runs_repeat(body, sequence):
     a = track(body, sequence, seed=3)[:2]
     b = track(body, sequence, seed=3)[:2]
     assert all(np.array_equal(x.pose, y.pose) for x, y in zip(a, b))
 
 
+@pytest.mark.slow
 def test_modes(body, sequence):
     lift = track(body, sequence, mode="lift")
     err = errors_mm(lift, sequence)
@@ -116,6 +119,7 @@ def test_no_person_then_recovery(body, sequence):
         tracker.step(Frame(3, 0, np.zeros((10, 10), np.float32), None, intr), det)
 
 
+@pytest.mark.slow
 def test_an_absurd_detection_does_not_stop_the_track(body, sequence):
     """Keypoints at NaN, at infinity and a million pixels away, all with high scores: the frame
     is tracked on what is left (depth), without an exception, and the next good detection
@@ -137,6 +141,7 @@ def test_an_absurd_detection_does_not_stop_the_track(body, sequence):
     assert 1000 * np.mean(np.linalg.norm(after.joints3d - truth, axis=1)) < 120
 
 
+@pytest.mark.slow
 def test_coarse_to_fine_tracks_and_ends_at_full_resolution(body, sequence):
     """With a coarse share the search scores most generations on the coarse level, the last at
     full resolution (the reported E_D is the full level's), and still tracks the walk."""
@@ -236,6 +241,7 @@ def test_a_different_turned_solution_becomes_the_challenger_and_reset_forgets_it
     assert tracker.challenger is None and tracker.age == 0 and tracker.previous is None
 
 
+@pytest.mark.slow
 def test_the_best_hypotheses_search_in_sub_swarms_of_their_own(body, sequence, monkeypatch):
     """With ``hypotheses = 2`` a tracked frame's search gets the groups: the track's swarm first,
     then sub-swarms of round(3/16 P) particles at the end, each started on a pose that differs
@@ -269,6 +275,7 @@ def test_the_best_hypotheses_search_in_sub_swarms_of_their_own(body, sequence, m
             assert changed and any(changed <= limb for limb in limbs), changed
 
 
+@pytest.mark.slow
 def test_the_polish_takes_the_searched_pose_further_down_and_leaves_the_arms(body, sequence):
     frame, det = next(frames_of(sequence))
     intr = Intrinsics.load(sequence / "intrinsic.json")
