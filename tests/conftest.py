@@ -30,6 +30,16 @@ MOVENET_COCO_BOUND_PX = 6.5
 BLAZEPOSE_COCO_BOUND_PX = 8.5
 """The same for BlazePose on the annotated box."""
 
+@pytest.fixture(scope="session", autouse=True)
+def _own_cache(tmp_path_factory):
+    """The run's own cache folder (``SWARMPOSE_CACHE_DIR``, inherited by the commands it starts): no
+    entry of another run or of the user's serves a test."""
+    import os
+
+    os.environ["SWARMPOSE_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))
+    yield
+
+
 needs_assets = pytest.mark.skipif(
     not ASSETS.is_dir(),
     reason=f"real assets not found at {ASSETS} (clone the project next to its shared/ folder, as CI does)",

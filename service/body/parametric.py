@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -29,6 +30,7 @@ from swarmpose.body.parametric_sdf import Part, Torso, mesh_field, sample_field
 from swarmpose.body.parametric_shape import BodyShape, preset_name
 from swarmpose.body.skeleton import JOINT_INDEX, POINT_NAMES
 from swarmpose.body.skinned import SkinnedBody, body_frame_bind_matrices, sparse_skin
+from swarmpose.core.cache import cache_key, cached_arrays
 from swarmpose.core.errors import ConfigError
 
 REFERENCE_HEIGHT = 1.75
@@ -203,6 +205,14 @@ def _skin(layout: _Layout, verts: np.ndarray) -> np.ndarray:
 _DEFAULT_SHAPE = BodyShape()
 
 
+_ARRAYS = ("vertices", "triangles", "skin_indices", "skin_weights", "bone_parents", "bone_heads", "bind_matrices",
+           "bone_joint", "bone_fraction", "point_bones", "point_rest")
+"""The fields of a built-in body kept in the user's cache (the rest follow from the shape)."""
+_BUILT_FROM = tuple(Path(__file__).parent / name for name in
+                    ("parametric.py", "parametric_sdf.py", "parametric_shape.py", "landmarks.py", "skinned.py"))
+"""The code a cached body depends on: a change to any of it builds the body again."""
+
+
 @functools.lru_cache(maxsize=16)
 def build_parametric_body(shape: BodyShape = _DEFAULT_SHAPE, resolution: float = 0.01) -> SkinnedBody:
     """The built-in skinned body for ``shape``, meshed on a grid of ``resolution`` metres.
@@ -210,10 +220,27 @@ def build_parametric_body(shape: BodyShape = _DEFAULT_SHAPE, resolution: float =
     Returns a :class:`SkinnedBody` with about 12,000 triangles (fewer for coarse grids),
     19 bones (:data:`BONE_NAMES`), every named point of ``POINT_NAMES``, the pelvis at the
     origin. Deterministic and memoised on ``(shape, resolution)``: callers share the
-    instance and must not modify its arrays in place (copy them first).
+    instance and must not modify its arrays in place (copy them first). Kept in the user's
+    cache (:mod:`swarmpose.core.cache`), so that a later process loads it instead of meshing it.
     """
     if not 0.003 <= float(resolution) <= 0.03:
         raise ConfigError(f"body mesh resolution {resolution} m is outside the allowed range 0.003..0.03 m")
+    key = cache_key(asdict(shape), float(resolution), sources=_BUILT_FROM)
+
+    def build() -> dict[str, np.ndarray]:
+        body = _mesh_body(shape, float(resolution))
+        return {name: getattr(body, name) for name in _ARRAYS}
+
+    arrays = cached_arrays("bodies", key, build)
+    preset = preset_name(shape)
+    return SkinnedBody(name="builtin" if preset in (None, "default") else f"builtin:{preset}",
+                       bone_names=BONE_NAMES, point_names=POINT_NAMES,
+                       metadata={"source": "builtin", "shape": asdict(shape), "resolution": float(resolution)},
+                       **{name: np.array(arrays[name]) for name in _ARRAYS})
+
+
+def _mesh_body(shape: BodyShape, resolution: float) -> SkinnedBody:
+    """The built-in body of ``shape`` meshed anew (see :func:`build_parametric_body`)."""
     layout = _layout(shape)
     values, origin = sample_field(layout.parts, BLEND * layout.scale, float(resolution))
     verts, faces = mesh_field(values, origin, float(resolution), TARGET_TRIANGLES)

@@ -9,6 +9,7 @@ from pathlib import Path
 from swarmpose.bench.accuracy import mean_over_seeds, run_matrix
 from swarmpose.bench.accuracy_report import format_summary, format_table, plot_heatmap
 from swarmpose.bench.detect import bench_detectors, format_detect_bench
+from swarmpose.bench.live import bench_live, format_live_bench
 from swarmpose.bench.matrix import DETECTORS, MODES, SUBSETS
 from swarmpose.bench.qualitative import write_overlays
 from swarmpose.bench.score import bench_score, format_bench
@@ -18,8 +19,10 @@ from swarmpose.bench.utdmhad import format_table as format_utdmhad_table
 from swarmpose.bench.utdmhad import summary as utdmhad_summary
 from swarmpose.cli.common import DEFAULTS, add_body_options, non_negative_float, non_negative_int, positive_int, quiet
 from swarmpose.cli.settings import add_flags, from_args
+from swarmpose.cli.track import TRACK_SETTINGS, add_source_argument, settings_of
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import parse_size
+from swarmpose.pipeline.config import ServiceConfig
 from swarmpose.sources.utdmhad_sync import DEPTH_LAG_FRAMES
 from swarmpose.tracking.config import TrackerConfig
 
@@ -44,6 +47,13 @@ def cmd_bench_track(args: argparse.Namespace) -> int:
     result = bench_track(body=args.body, shape=args.shape, motion=args.motion, frames=args.frames,
                          repeats=args.repeats, tracker=from_args(TrackerConfig, args), progress=not quiet(args))
     print(json.dumps(result) if args.json else format_track_bench(result))
+    return 0
+
+
+def cmd_bench_live(args: argparse.Namespace) -> int:
+    """What a client sees when a recording is served live: poses/s, latency, start-up, live and client Δ."""
+    result = bench_live(settings_of(args), seconds=args.seconds, offline=args.offline, startup=args.startup)
+    print(json.dumps(result) if args.json else format_live_bench(result))
     return 0
 
 
@@ -197,6 +207,20 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
     add_flags(p, TrackerConfig)
     p.add_argument("--json", action="store_true", help="one JSON object")
     p.set_defaults(func=cmd_bench_track)
+    p = bench.add_parser("live", parents=[common], formatter_class=DEFAULTS,
+                         help="serve a recording at its rate (looped) and report what a client sees: poses/s, "
+                              "latency, start-up, live and client Δ")
+    add_source_argument(p)
+    add_flags(p, ServiceConfig, (*TRACK_SETTINGS, "rate"))
+    p.add_argument("--seconds", type=non_negative_float, default=20.0,
+                   help="how long to serve after the first pose")
+    p.add_argument("--offline", action=argparse.BooleanOptionalAction, default=True,
+                   help="also track every frame of the sequence for the offline Δ")
+    p.add_argument("--startup", action=argparse.BooleanOptionalAction, default=True,
+                   help="also time the start-up of two serve processes (empty cache, then warm)")
+    p.add_argument("--config", dest="config_file", default=None, help="TOML file of settings ($SWARMPOSE_CONFIG)")
+    p.add_argument("--json", action="store_true", help="one JSON object")
+    p.set_defaults(func=cmd_bench_live)
     p = bench.add_parser("detect", parents=[common], formatter_class=DEFAULTS,
                          help="ONNX 2D detectors: time per frame and error on a COCO photo")
     p.add_argument("--repeats", type=positive_int, default=20, help="timed runs per detector and image (medians)")

@@ -39,16 +39,21 @@ def json_vector(v: np.ndarray, digits: int) -> list[float] | None:
 
 def body_message(body_id: int, state: str, reason: str, pose: np.ndarray | None, joints3d: np.ndarray,
                  joints2d: np.ndarray, confidence: np.ndarray, objective: Mapping[str, float],
-                 detection: dict | None = None) -> dict:
+                 detection: dict | None = None, velocities: np.ndarray | None = None) -> dict:
     """One body of a frame message.
 
     pose: (36,) or None; joints3d: (14, 3) m and joints2d: (14, 2) px in ``EVAL_JOINTS``
     order (NaN rows where unknown); confidence: (14,) 0..1; objective: E and its terms;
-    detection: ``{"layout", "keypoints": {name: [x, y, score]}}`` the body was fitted to.
+    detection: ``{"layout", "keypoints": {name: [x, y, score]}}`` the body was fitted to;
+    velocities: (14, 3) m/s of the joints (None, or a joint's non-finite row: no ``velocity_m_s``).
     """
     joints = {name: {"position_m": json_vector(p3, 6), "pixel": json_vector(p2, 2),
                      "confidence": round(float(np.clip(c, 0.0, 1.0)), 3)}
               for name, p3, p2, c in zip(EVAL_JOINTS, joints3d, joints2d, confidence)}
+    if velocities is not None:
+        for name, v in zip(EVAL_JOINTS, velocities):
+            if joints[name]["position_m"] is not None and np.all(np.isfinite(v)):
+                joints[name]["velocity_m_s"] = json_vector(v, 4)
     message = {"id": int(body_id), "state": state, "reason": reason,
                "pose": None if pose is None else [round(float(x), 6) for x in pose],
                "joints": joints,

@@ -16,14 +16,14 @@ import jsonschema
 
 from swarmpose.core.errors import ConfigError, ProtocolError
 
-PROTOCOL_VERSION = 5
+PROTOCOL_VERSION = 6
 """The protocol as a whole; raised whenever one message's version is."""
-MESSAGE_VERSIONS = {"frame": 3, "status": 3, "info": 3}
+MESSAGE_VERSIONS = {"frame": 4, "status": 3, "info": 3}
 """Each message's own version: frame 2 added the optional per-body ``detection``; status 2 the
 optional ``tracker.people`` counts; status 3 and info 2 the optional ``personalisation``
 (``tracker.personalisation``, ``body.personalisation``: ``--personalize N``); frame 3 and info 3
 the world frame (frame ``coordinates`` and ``camera_to_world``, info ``world``: ``--floor``,
-``--coordinates``)."""
+``--coordinates``); frame 4 each joint's optional ``velocity_m_s``."""
 SCHEMAS = ("frame", "status", "info")
 CAMERA_ID = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 

@@ -10,6 +10,7 @@ caller's ``ExitStack``.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -34,7 +35,7 @@ from swarmpose.publish.rerun_view import open_view_sink
 from swarmpose.publish.sink import Sink
 from swarmpose.publish.zenoh_link import ZenohSink
 from swarmpose.sim.scoring import ScoreSink
-from swarmpose.sources.base import Frame, FrameSource
+from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
 from swarmpose.sources.registry import open_source
 from swarmpose.tracking.auto_height import ESTIMATES as HEIGHT_ESTIMATES
 from swarmpose.tracking.auto_height import HeightFittingTracker, applies
@@ -180,10 +181,13 @@ class ProgressSink:
 
 
 def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: str = "",
-                 progress: bool = False) -> tuple[Worker, Parts, ZenohSink | None]:
+                 progress: bool = False, sinks: Sequence[Sink] = (),
+                 on_acquired: Callable[[Frame | SkippedFrame, int], None] | None = None,
+                 ) -> tuple[Worker, Parts, ZenohSink | None]:
     """The worker of ``config`` with its sinks: zenoh (unless ``zenoh_mode`` is off), the replay
-    files (``out`` or ``record``), the ground-truth scorer, the log, the health file and (with
-    ``progress``) a progress bar. replay: no dropped frames, no pacing, no looping."""
+    files (``out`` or ``record``), the ground-truth scorer, the log, the health file, (with
+    ``progress``) a progress bar, and last the caller's ``sinks``. replay: no dropped frames, no
+    pacing, no looping. on_acquired: the worker's observer of the frames it takes from the source."""
     if config.tracker.backward:  # before anything is opened
         raise ConfigError(f"backward = {config.tracker.backward}: the backward pass publishes frames late and needs "
                           "the recording, which serve and replay do not wait for; run `swarmpose track SOURCE --out "
@@ -215,12 +219,14 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
         zenoh = ZenohSink(config.camera_id, info, mode=z.zenoh_mode, connect=z.connect, listen=z.listen,
                           multicast=z.multicast, config_file=z.zenoh_config, retry_s=config.reopen_s)
         stack.callback(zenoh.close)
+    extra = list(sinks)
     sinks: list[Sink] = ([zenoh] if zenoh else []) + parts.sinks + [LogSink()]
     if config.health_file:
         sinks.append(HealthFileSink(config.health_file))
     total = config.frames or parts.source.length or None
     if progress:
         sinks.append(ProgressSink("replay", total))
+    sinks += extra
     if replay:
         pace = config.rate or None
     else:
@@ -230,7 +236,7 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
                     pace_fps=pace, loop=config.loop and not replay, frames=config.frames,
                     status_period_s=config.status_period_s, reopen_s=config.reopen_s, source_uri=uri,
                     detector_spec=parts.config.detector, zenoh_state=zenoh.state if zenoh else None,
-                    source=parts.source)
+                    source=parts.source, on_acquired=on_acquired)
     return worker, parts, zenoh
 
 

@@ -40,6 +40,7 @@ from swarmpose.detect.joints import Detector, Joints2D
 from swarmpose.detect.people import Segmentation, segment_people
 from swarmpose.detect.per_person import PersonDetection, detect_each
 from swarmpose.gpu.errors import DeviceError
+from swarmpose.pipeline.velocity import JointVelocities
 from swarmpose.pipeline.world import NOT_FITTED, WorldFrame
 from swarmpose.sources.base import Frame, SkippedFrame, exc_message
 from swarmpose.tracking.body_tracker import BodyTracker
@@ -56,15 +57,21 @@ EMPTY_DEPTH = "the depth image has no valid pixels (every one 0: no measurement)
 @dataclass
 class Detection:
     """The first half's answer for one frame: joints (None: none), a note when the detector
-    failed, and the detection time (ms). With several people: ``people`` (each person's segment
-    and joints; None in single-person mode) and the ``segmentation`` they came from (None when
-    it found nobody and the whole frame was detected)."""
+    failed, and the detection time (ms, the segmentation's ``segment_ms`` included). With several
+    people: ``people`` (each person's segment and joints; None in single-person mode) and the
+    ``segmentation`` they came from (None when it found nobody and the whole frame was detected)."""
 
     joints: Joints2D | None
     note: str = ""
     ms: float = 0.0
     people: tuple[PersonDetection, ...] | None = None
     segmentation: Segmentation | None = None
+    segment_ms: float = 0.0
+
+    @property
+    def timings_ms(self) -> dict[str, float]:
+        """``detect`` (the 2D network and the rest of detection) and ``segment`` (people in the depth), ms."""
+        return {"detect": self.ms - self.segment_ms, "segment": self.segment_ms}
 
 
 def describe_error(exc: BaseException) -> str:
@@ -126,6 +133,7 @@ class FramePipeline:
         self._box: np.ndarray | None = None
         self._boxes: list[np.ndarray] = []  # the last frame's tracked bodies' joint boxes (several people)
         self._floor = FloorCache()
+        self.velocities = JointVelocities()
         self._box_lock = threading.Lock()
         self._warned_empty = False  # a depth image without valid pixels is logged once
 
@@ -173,7 +181,7 @@ class FramePipeline:
     def _detect(self, frame: Frame) -> Detection:
         """:meth:`detect` without the floor of the world frame."""
         t0 = time.perf_counter()
-        segmentation = None
+        segmentation, segment_ms = None, 0.0
         if self.max_people > 1:
             try:
                 reuse = self._floor.reusable(frame.intrinsics)
@@ -182,6 +190,7 @@ class FramePipeline:
                 self._floor.used(segmentation.floor, frame.intrinsics, fitted=not reuse)
             except Exception as exc:  # a segmentation that throws: the frame is detected as a whole
                 log.debug("frame %d: segmentation failed: %s", frame.index, exc_message(exc))
+            segment_ms = 1000 * (time.perf_counter() - t0)
         if segmentation is not None and segmentation.people:
             with self._box_lock:
                 hints = list(self._boxes)
@@ -192,7 +201,8 @@ class FramePipeline:
                 segmentation = None
             else:
                 note = "; ".join(p.note for p in people if p.note)
-                return Detection(people[0].joints, note, 1000 * (time.perf_counter() - t0), people, segmentation)
+                return Detection(people[0].joints, note, 1000 * (time.perf_counter() - t0), people, segmentation,
+                                 segment_ms)
         with self._box_lock:
             box = self._box
         try:
@@ -207,12 +217,13 @@ class FramePipeline:
                 log.warning("frame %d: %s; check the depth stream (units, registration to colour); such frames "
                             "are tracked as having nobody in view", frame.index, EMPTY_DEPTH)
         people = (PersonDetection(None, joints, note),) if self.max_people > 1 else None
-        return Detection(joints, note, 1000 * (time.perf_counter() - t0), people, segmentation)
+        return Detection(joints, note, 1000 * (time.perf_counter() - t0), people, segmentation, segment_ms)
 
     def track(self, frame: Frame, detection: Detection, received_ns: int = 0) -> FrameResult:
         """The bodies of ``frame`` given its detection; never raises for a frame it cannot track.
-        received_ns: wall-clock time (ns) the frame was taken from its source (0: unknown)."""
-        return self.in_world(self._track(frame, detection, received_ns))
+        received_ns: wall-clock time (ns) the frame was taken from its source (0: unknown). Each
+        tracked body carries its joints' velocities (:mod:`~swarmpose.pipeline.velocity`)."""
+        return self.in_world(self.velocities(self._track(frame, detection, received_ns)))
 
     def in_world(self, result: FrameResult) -> FrameResult:
         """``result`` with the world state as known after it (the origin set by its first tracked
@@ -236,7 +247,7 @@ class FramePipeline:
             return self._failed(frame, detection, exc, received_ns, t0)
         with self._box_lock:
             self._box = body.joints_box()
-        timings = {"detect": detection.ms, **body.timings_ms}
+        timings = {**detection.timings_ms, **body.timings_ms}
         timings["total"] = detection.ms + body.timings_ms.get("total", 1000 * (time.perf_counter() - t0))
         return FrameResult(frame.index, frame.timestamp_ns, (body,), detection.note, timings, received_ns=received_ns)
 
@@ -266,7 +277,7 @@ class FramePipeline:
         with self._box_lock:
             self._box = bodies[0].joints_box() if len(bodies) == 1 else None
             self._boxes = [b for b in boxes if b is not None]
-        timings: dict[str, float] = {"detect": detection.ms}
+        timings: dict[str, float] = dict(detection.timings_ms)
         for body in bodies:  # each body's parts (start, search, launch, ...) summed over the people
             for key, ms in body.timings_ms.items():
                 timings[key] = timings.get(key, 0.0) + ms
@@ -305,6 +316,7 @@ class FramePipeline:
             self.tracker.new_person()
         if self.people is not None:
             self.people.reset()
+        self.velocities.reset()
         with self._box_lock:
             self._box, self._boxes = None, []
 

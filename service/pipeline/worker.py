@@ -69,15 +69,19 @@ class Worker:
     deliver a recording at this rate (None: as fast as it reads); loop: start a recording
     over when it ends; frames: stop after this many (0 = all); source_uri / detector_spec:
     for the status; zenoh_state: a callable returning the status' ``zenoh`` part; source:
-    the already opened source (None: ``open_source()``).
+    the already opened source (None: ``open_source()``); on_acquired: called by the acquisition
+    thread with every item it takes from the source and the wall-clock time (ns) it took it (the
+    camera's clock, as ``swarmpose bench live`` reads it).
     """
 
     def __init__(self, open_source: Callable[[], FrameSource], pipeline: FramePipeline, sinks: Sequence[Sink],
                  *, camera: str, drop_stale: bool, pace_fps: float | None = None, loop: bool = False,
                  frames: int = 0, status_period_s: float = 1.0, reopen_s: float = 5.0, source_uri: str = "",
                  detector_spec: str = "", zenoh_state: Callable[[], dict] | None = None,
-                 source: FrameSource | None = None):
+                 source: FrameSource | None = None,
+                 on_acquired: Callable[[Frame | SkippedFrame, int], None] | None = None):
         self.open_source, self.pipeline, self.sinks = open_source, pipeline, list(sinks)
+        self.on_acquired = on_acquired
         self.camera, self.drop_stale, self.pace_fps, self.loop = camera, drop_stale, pace_fps, loop
         self.frames, self.status_period_s, self.reopen_s = frames, status_period_s, reopen_s
         self.source_uri, self.detector_spec, self.zenoh_state = source_uri, detector_spec, zenoh_state
@@ -239,7 +243,10 @@ class Worker:
                 if wait > 0 and self._stop.wait(wait):
                     return
             self.stats.update(received=1)
-            if not self._acquired.put(Received(item, time.time_ns())):
+            received_ns = time.time_ns()
+            if self.on_acquired is not None:
+                self.on_acquired(item, received_ns)
+            if not self._acquired.put(Received(item, received_ns)):
                 self.stats.update(dropped=1)
             if self._enough():
                 return

@@ -42,6 +42,7 @@ from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import TrackingError
+from swarmpose.core.timing import timed
 from swarmpose.detect.joints import Joints2D
 from swarmpose.gpu.context import ClContext
 from swarmpose.gpu.scorer import ParticleScorer
@@ -222,13 +223,11 @@ class BodyTracker:
             centre = self.previous
             hidden = self.config.hidden_lifts and self.config.mode != "depth"  # depth mode: no joint term
             arms = self.config.arm_proposals and self.config.mode != "joints"  # proposals the depth judges
-            t_scene = time.perf_counter()
-            scene = body_scene(self.body, centre) if hidden or arms else None  # one posed body for both
-            timings["scene"] = 1000 * (time.perf_counter() - t_scene)
+            with timed(timings, "scene"):
+                scene = body_scene(self.body, centre) if hidden or arms else None  # one posed body for both
             if hidden:
-                t_hidden = time.perf_counter()
-                targets = without_hidden_lifts(self.body, centre, targets, self.intrinsics, scene)
-                timings["hidden"] = 1000 * (time.perf_counter() - t_hidden)
+                with timed(timings, "hidden"):
+                    targets = without_hidden_lifts(self.body, centre, targets, self.intrinsics, scene)
             recheck = self._recheck(frame.index, lifted, targets, depth, rng, timings)
             torso = torso_pose(self.body, lifted, centre[7:], upright=False)
             offset = np.abs(torso[:3] - centre[:3]) if torso is not None else np.zeros(3)
@@ -239,14 +238,12 @@ class BodyTracker:
             box = self.search_box(centre, targets)
             room = pso.particles - len(seeds)
             if arms and room > 0:  # as many as the swarm has room for
-                t_arms = time.perf_counter()
-                proposals += arm_proposals(self.body, centre, depth, self.intrinsics, box, scene)[:room]
-                timings["arms"] = 1000 * (time.perf_counter() - t_arms)
+                with timed(timings, "arms"):
+                    proposals += arm_proposals(self.body, centre, depth, self.intrinsics, box, scene)[:room]
                 room = pso.particles - len(seeds) - len(proposals)
             if self.config.limb_flips and room > 0:
-                t_flips = time.perf_counter()
-                proposals += limb_flips(self.body, centre, most=room)
-                timings["flips"] = 1000 * (time.perf_counter() - t_flips)
+                with timed(timings, "flips"):
+                    proposals += limb_flips(self.body, centre, most=room)
         for i, s in enumerate((seeds + proposals)[:pso.particles]):
             start[i] = s
 
@@ -254,16 +251,17 @@ class BodyTracker:
         self.objective.set_frame(depth, box, targets, centre)
         groups = None
         if state == "tracking":  # the ranking's time is its own, not the search's
-            t_rank = time.perf_counter()
-            groups = hypothesis_groups(self.objective, proposals, start, self.config.hypotheses, radius, rng,
-                                       keep=len(seeds))
-            timings["hypotheses"] = 1000 * (time.perf_counter() - t_rank)
+            with timed(timings, "hypotheses"):
+                groups = hypothesis_groups(self.objective, proposals, start, self.config.hypotheses, radius, rng,
+                                           keep=len(seeds))
         self.objective.take_spent()
         result = self._search(self.objective, start, rng, pso, groups)
         timings["pso"] = 1000 * (time.perf_counter() - t1) - timings.get("hypotheses", 0.0)
         timings.update(search_split(self.objective.take_spent(), timings["pso"]))
-        best = polish_solution(self.objective, result, self.previous, self.config.polish, rng,  # polish 0: as it is
-                               self.age < max(YOUNG_RECHECKS), self._hold_facing, REPLACED_TURN_DEG)  # young: a duel
+        with timed(timings, "polish"):  # polish 0: as it is; a young track: a duel
+            best = polish_solution(self.objective, result, self.previous, self.config.polish, rng,
+                                   self.age < max(YOUNG_RECHECKS), self._hold_facing, REPLACED_TURN_DEG)
+        t_verdict = time.perf_counter()
         self.objective(best[None])
         parts = {k: float(v[0]) for k, v in self.objective.last_parts.items()}
         tile, counts = self._render(best)
@@ -280,6 +278,7 @@ class BodyTracker:
         joints3d = self.body.posed_points(best[None], EVAL_JOINTS)[0]
         joints2d = self.intrinsics.project(joints3d)
         conf = verdict.confidence(self.objective, tile, joints2d, joints, targets, self.config.min_score)
+        timings["verdict"] = 1000 * (time.perf_counter() - t_verdict)
         timings["total"] = 1000 * (time.perf_counter() - t0)
         result = BodyResult(self.body_id, out_state, reason, best, joints3d, joints2d, conf, parts, timings, joints)
         if self.filter is None or out_state == "lost":

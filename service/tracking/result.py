@@ -39,7 +39,8 @@ class BodyResult:
     order (NaN where unknown); joints2d: (14, 2) px; confidence: (14,) 0..1; objective: E
     and its terms of the chosen pose; timings_ms: where this body's time went; detection:
     the 2D joints it was fitted to (None: none); unfiltered: with ``--smoothing``, the result
-    as the search found it, before the published pose was filtered (None: not filtered).
+    as the search found it, before the published pose was filtered (None: not filtered);
+    velocities: (14, 3) m/s of the joints, camera frame (None: not estimated).
     """
 
     id: int
@@ -53,6 +54,7 @@ class BodyResult:
     timings_ms: Mapping[str, float] = field(default_factory=dict)
     detection: Joints2D | None = None
     unfiltered: BodyResult | None = None
+    velocities: np.ndarray | None = None
 
     @property
     def found(self) -> BodyResult:
@@ -84,12 +86,13 @@ class BodyResult:
         detection = None
         if self.detection is not None:
             detection = {"layout": self.detection.layout.name, "keypoints": self.detection.as_dict()}
-        joints3d, pose = self.joints3d, self.pose
+        joints3d, pose, velocities = self.joints3d, self.pose, self.velocities
         if camera_to_world is not None:
             joints3d = transform_points(camera_to_world, joints3d)
             pose = None if pose is None else transform_poses(camera_to_world, pose)
+            velocities = None if velocities is None else velocities @ np.asarray(camera_to_world)[:3, :3].T
         return body_message(self.id, self.state, self.reason, pose, joints3d, self.joints2d,
-                            self.confidence, self.objective, detection)
+                            self.confidence, self.objective, detection, velocities)
 
 
 def lost_body(reason: str, body_id: int = 0, timings_ms: Mapping[str, float] | None = None,

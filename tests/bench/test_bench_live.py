@@ -1,0 +1,66 @@
+"""``bench live``: its figures against a log worked out by hand, and one real run of the worker."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from swarmpose.bench.live import LiveLog, Published, accuracy_figures, bench_live, stage_split
+from swarmpose.sources.groundtruth import GroundTruth
+
+J = 14
+
+
+def _truth(frames: int) -> GroundTruth:
+    """Every joint of frame f at x = 0.1 f m: a person moving at 1 m/s filmed at 10 frames/s."""
+    joints = np.zeros((frames, J, 3))
+    joints[:, :, 0] = 0.1 * np.arange(frames)[:, None]
+    return GroundTruth(tuple(range(frames)), np.zeros((frames, 36)), joints, (None,) * frames)
+
+
+def _published(frame: int, received_s: float, publish_s: float, truth: GroundTruth) -> Published:
+    joints = truth.joints3d[frame] + [0.01, 0.0, 0.0]  # 10 mm off in x
+    velocity = np.tile([1.0, 0.0, 0.0], (J, 1))
+    return Published(0, frame, int(received_s * 1e9), int(publish_s * 1e9), (publish_s - received_s) * 1000,
+                     {0: joints}, {0: velocity}, {"detect": 2.0, "pso": 30.0, "polish": 5.0, "total": 40.0}, 1.5)
+
+
+def test_live_client_floor_and_extrapolated_deltas_are_those_worked_out_by_hand():
+    truth = _truth(6)
+    log = LiveLog()
+    log.acquired = [(0, k, int(0.1 * k * 1e9)) for k in range(6)]  # frames 0..5 at 0.0 .. 0.5 s
+    log.published = [_published(0, 0.0, 0.05, truth), _published(3, 0.3, 0.35, truth)]
+    figures = accuracy_figures(log, truth)
+    assert figures["live_mm"] == pytest.approx(10.0)
+    # frames 1, 2, 3 see frame 0's pose (x = 0.01), frames 4, 5 frame 3's (x = 0.31); frame 0 sees none yet
+    assert figures["client_mm"] == pytest.approx((90 + 190 + 290 + 90 + 190) / 5)
+    assert figures["client_floor_mm"] == pytest.approx((100 + 200 + 300 + 100 + 200) / 5)
+    # moved on at 1 m/s each pose is 10 mm off again (frame 3 from frame 0: 0.3 s, the horizon)
+    assert figures["client_extrapolated_mm"] == pytest.approx(10.0)
+    assert figures["missed"] == 0
+    split = stage_split(log)
+    assert split["search"] == 30.0 and split["polish"] == 5.0 and split["publish"] == 1.5 and split["total"] == 40.0
+
+
+def test_a_published_frame_without_the_person_is_a_miss_not_an_error():
+    truth = _truth(2)
+    log = LiveLog()
+    log.acquired = [(0, 0, 0), (0, 1, int(1e8))]
+    log.published = [Published(0, 0, 0, int(5e7), 50.0, {}, {}, {}, 0.0), _published(1, 0.1, 0.12, truth)]
+    figures = accuracy_figures(log, truth)
+    assert figures["missed"] == 1 and figures["live_mm"] == pytest.approx(10.0)
+
+
+@pytest.mark.slow
+def test_a_short_live_run_publishes_poses_near_the_truth(wave_sequence):
+    from swarmpose.pipeline.config import ServiceConfig
+    from swarmpose.tracking.config import TrackerConfig
+
+    config = ServiceConfig(source=str(wave_sequence), detector="simulated", overlay=False,
+                           tracker=TrackerConfig(particles=16, generations=8, polish=4, max_people=1))
+    result = bench_live(config, seconds=2.0, offline=True, startup=False)
+    assert result["poses"] >= 3 and result["poses_per_s"] > 0
+    assert result["camera_frames"] > result["published"] - 1  # every published frame was served first
+    assert result["latency_ms"]["p95"] >= result["latency_ms"]["median"] > 0
+    assert result["live_mm"] < 150 and result["offline_mm"] < 150
+    assert result["client_floor_mm"] is not None and result["stage_ms"]["search"] > 0
