@@ -43,7 +43,7 @@ from swarmpose.pipeline.config import ServiceConfig
 from swarmpose.pipeline.service import build_worker
 from swarmpose.pipeline.status import latency_summary
 from swarmpose.publish.pose_at import extrapolate
-from swarmpose.sources.base import Frame, SkippedFrame
+from swarmpose.sources.base import DeferredFrame, Frame, SkippedFrame
 
 STAGES = {
     "detect": ("detect",),
@@ -94,7 +94,7 @@ class LiveLog:
     _pass_of: dict[int, tuple[int, int]] = field(default_factory=dict)
     _lock: threading.Lock = field(default_factory=threading.Lock)
 
-    def on_acquired(self, item: Frame | SkippedFrame, received_ns: int) -> None:
+    def on_acquired(self, item: Frame | SkippedFrame | DeferredFrame, received_ns: int) -> None:
         """Called by the acquisition thread for every item it takes (a new pass when the index goes back)."""
         with self._lock:
             if item.index <= self._last_index:

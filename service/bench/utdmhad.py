@@ -57,6 +57,7 @@ from swarmpose.bench.accuracy import scores, track_with_truth
 from swarmpose.bench.detect import find_assets
 from swarmpose.bench.matrix import DETECTORS, MODES
 from swarmpose.bench.store import mode_settings, read_record, seeded, tracker_settings, write_record
+from swarmpose.bench.utdmhad_names import ACTIONS, SHAPES, SUBJECTS
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.progress import progress_bar
 from swarmpose.pipeline.config import ServiceConfig
@@ -66,18 +67,7 @@ from swarmpose.sources.utdmhad_sync import DEPTH_LAG_FRAMES, check_lag
 from swarmpose.tracking.config import TrackerConfig
 
 FOLDER = "rgbd/utd_mhad/depth"
-SUBJECTS = ("s1", "s2", "s3")
-SHAPES = ("default", "measured")
 _NAME = re.compile(r"^a(\d+)_(s\d+)_t\d+_depth\.mat$")
-
-ACTIONS = {
-    1: "swipe left", 2: "swipe right", 3: "wave", 4: "clap", 5: "throw", 6: "arm cross", 7: "basketball shoot",
-    8: "draw x", 9: "draw circle (cw)", 10: "draw circle (ccw)", 11: "draw triangle", 12: "bowling", 13: "boxing",
-    14: "baseball swing", 15: "tennis swing", 16: "arm curl", 17: "tennis serve", 18: "push", 19: "knock",
-    20: "catch", 21: "pickup & throw", 22: "jog", 23: "walk", 24: "sit to stand", 25: "stand to sit",
-    26: "lunge", 27: "squat",
-}
-"""UTD-MHAD's 27 actions (from the dataset's paper)."""
 
 
 def sequences(assets: Path, subjects: tuple[str, ...] = SUBJECTS, actions: tuple[int, ...] = ()) -> list[Path]:

@@ -6,17 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
-from swarmpose.bench.accuracy import mean_over_seeds, run_matrix
-from swarmpose.bench.accuracy_report import format_summary, format_table, plot_heatmap
-from swarmpose.bench.detect import bench_detectors, format_detect_bench
-from swarmpose.bench.live import bench_live, format_live_bench
 from swarmpose.bench.matrix import DETECTORS, MODES, SUBSETS
-from swarmpose.bench.qualitative import write_overlays
-from swarmpose.bench.score import bench_score, format_bench
-from swarmpose.bench.track import bench_track, format_track_bench
-from swarmpose.bench.utdmhad import ACTIONS, SHAPES, SUBJECTS, run_utdmhad
-from swarmpose.bench.utdmhad import format_table as format_utdmhad_table
-from swarmpose.bench.utdmhad import summary as utdmhad_summary
+from swarmpose.bench.utdmhad_names import ACTIONS, SHAPES, SUBJECTS
 from swarmpose.cli.common import DEFAULTS, add_body_options, non_negative_float, non_negative_int, positive_int, quiet
 from swarmpose.cli.settings import add_flags, from_args
 from swarmpose.cli.track import TRACK_SETTINGS, add_source_argument, settings_of
@@ -36,6 +27,8 @@ def _size(text: str) -> tuple[int, int]:
 
 def cmd_bench_score(args: argparse.Namespace) -> int:
     """Hypotheses per second of the OpenCL scorer against the Open3D ray-casting baseline."""
+    from swarmpose.bench.score import bench_score, format_bench
+
     result = bench_score(particles=args.particles, resolution=args.tile, body=args.body, shape=args.shape,
                          repeats=args.repeats, device=args.device, lod=args.triangles, host_fk=args.host_fk)
     print(json.dumps(result) if args.json else format_bench(result))
@@ -44,6 +37,8 @@ def cmd_bench_score(args: argparse.Namespace) -> int:
 
 def cmd_bench_track(args: argparse.Namespace) -> int:
     """End-to-end frames per second of the tracker on a fixed synthetic sequence, with the split."""
+    from swarmpose.bench.track import bench_track, format_track_bench
+
     result = bench_track(body=args.body, shape=args.shape, motion=args.motion, frames=args.frames,
                          repeats=args.repeats, tracker=from_args(TrackerConfig, args), progress=not quiet(args))
     print(json.dumps(result) if args.json else format_track_bench(result))
@@ -52,6 +47,8 @@ def cmd_bench_track(args: argparse.Namespace) -> int:
 
 def cmd_bench_live(args: argparse.Namespace) -> int:
     """What a client sees when a recording is served live: poses/s, latency, start-up, live and client Δ."""
+    from swarmpose.bench.live import bench_live, format_live_bench
+
     result = bench_live(settings_of(args), seconds=args.seconds, offline=args.offline, startup=args.startup)
     print(json.dumps(result) if args.json else format_live_bench(result))
     return 0
@@ -59,6 +56,8 @@ def cmd_bench_live(args: argparse.Namespace) -> int:
 
 def cmd_bench_detect(args: argparse.Namespace) -> int:
     """Time per frame and COCO-photo error of the ONNX 2D detectors."""
+    from swarmpose.bench.detect import bench_detectors, format_detect_bench
+
     result = bench_detectors(repeats=args.repeats, assets=args.assets, threads=args.threads)
     print(json.dumps(result) if args.json else format_detect_bench(result))
     return 0
@@ -77,6 +76,9 @@ def _names(allowed: tuple[str, ...]):
 
 def cmd_bench_accuracy(args: argparse.Namespace) -> int:
     """The tracker over the benchmark matrix: per cell and mode Δ, A(100), lost frames, facing."""
+    from swarmpose.bench.accuracy import mean_over_seeds, run_matrix
+    from swarmpose.bench.accuracy_report import format_summary, format_table, plot_heatmap
+
     tracker = {"particles": args.particles, "generations": args.generations, "max_people": args.max_people,
                **_tracker_switches(args)}
     records = run_matrix(Path(args.out), subset=args.subset, detectors=args.detectors, modes=args.modes,
@@ -97,6 +99,10 @@ def cmd_bench_accuracy(args: argparse.Namespace) -> int:
 
 def cmd_bench_utdmhad(args: argparse.Namespace) -> int:
     """The tracker on UTD-MHAD's real Kinect sequences against the Kinect skeleton."""
+    from swarmpose.bench.utdmhad import format_table as format_utdmhad_table
+    from swarmpose.bench.utdmhad import run_utdmhad
+    from swarmpose.bench.utdmhad import summary as utdmhad_summary
+
     tracker = {"particles": args.particles, "generations": args.generations, "auto_height": args.auto_height,
                **_tracker_switches(args)}
     records = run_utdmhad(Path(args.out), modes=args.modes, detectors=args.detectors, shapes=args.shapes,
@@ -123,6 +129,8 @@ def cmd_bench_utdmhad(args: argparse.Namespace) -> int:
 
 def cmd_bench_overlays(args: argparse.Namespace) -> int:
     """Overlay pictures of the tracker on the real Kinect frames without ground truth."""
+    from swarmpose.bench.qualitative import write_overlays
+
     settings = {"particles": args.particles, "generations": args.generations, "max_people": args.max_people}
     report = write_overlays(Path(args.out), detector=args.detector, assets=args.assets, settings=settings)
     print(json.dumps(report) if args.json else "\n".join(

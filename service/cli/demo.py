@@ -24,16 +24,10 @@ import time
 from contextlib import ExitStack
 from pathlib import Path
 
-from swarmpose.body.loader import load_body
 from swarmpose.cli.common import DEFAULTS, positive_int, quiet
-from swarmpose.cli.synth import print_synth_summary
 from swarmpose.core.errors import PublishError
-from swarmpose.core.polling import wait_until
 from swarmpose.core.settings import build
-from swarmpose.motion.builtin import builtin_motion
 from swarmpose.pipeline.config import ServiceConfig
-from swarmpose.pipeline.service import build_worker, format_summary, run_summary
-from swarmpose.sim.synth import SynthConfig, synthesize
 
 DEMO_DIR = Path("demo-output")
 SUBSCRIBER_FRAMES = 5
@@ -70,6 +64,8 @@ def start_subscriber(endpoint: str, camera: str, count: int) -> tuple[subprocess
 
 def wait_for_subscriber(zenoh_sink, lines: list[str], timeout_s: float) -> bool:
     """True once the subscriber has declared its subscription and the worker's zenoh session sees it."""
+    from swarmpose.core.polling import wait_until
+
     ready = wait_until(lambda: zenoh_sink.state()["peers"] > 0 and any(line.startswith("listening on")
                                                                       for line in lines), timeout_s, 0.1)
     if ready:
@@ -79,6 +75,8 @@ def wait_for_subscriber(zenoh_sink, lines: list[str], timeout_s: float) -> bool:
 
 def run_demo(sequence: Path, out: Path, particles: int, generations: int, quiet: bool, frames: int) -> int:
     """Serve ``sequence`` (``frames`` long) over zenoh with a subscriber beside it; print the results."""
+    from swarmpose.pipeline.service import build_worker, format_summary, run_summary
+
     endpoint = f"tcp/127.0.0.1:{free_local_port()}"
     config = build(ServiceConfig, {"source": f"folder:{sequence}", "camera_id": "demo", "zenoh_mode": "peer",
                                    "listen": (endpoint,), "multicast": False, "particles": particles,
@@ -112,6 +110,11 @@ def run_demo(sequence: Path, out: Path, particles: int, generations: int, quiet:
 def cmd_demo(args: argparse.Namespace) -> int:
     """The main job on embedded defaults: synthesise a short sequence, serve it over zenoh with a
     subscriber beside it, report Δ, A(t), fps, latency and the replay outputs."""
+    from swarmpose.body.loader import load_body
+    from swarmpose.cli.synth import print_synth_summary
+    from swarmpose.motion.builtin import builtin_motion
+    from swarmpose.sim.synth import SynthConfig, synthesize
+
     body = load_body("builtin", "default")
     config = SynthConfig(frames=args.frames, fps=30.0, seed=0)
     motion = builtin_motion("wave", config.frames, config.fps)

@@ -13,18 +13,20 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
-from swarmpose.body.gltf_write import save_glb
 from swarmpose.cli.common import DEFAULTS, non_negative_int, positive_int, quiet
 from swarmpose.cli.settings import add_flags
 from swarmpose.cli.track import TRACK_SETTINGS, add_source_argument, settings_of
 from swarmpose.core.errors import ConfigError
 from swarmpose.pipeline.config import ServiceConfig
-from swarmpose.pipeline.personalise_run import personalise
-from swarmpose.tracking.personalise import FitSettings, body_measures
+from swarmpose.tracking.fit_settings import FitSettings
 
 
 def cmd_personalize(args: argparse.Namespace) -> int:
     """Estimate the shape, write the GLB, print what was found."""
+    from swarmpose.body.gltf_write import save_glb
+    from swarmpose.pipeline.personalise_run import personalise
+    from swarmpose.tracking.personalise import body_measures
+
     config = settings_of(args)
     out = Path(args.out)
     if out.suffix.lower() not in (".glb", ".gltf"):

@@ -11,13 +11,14 @@ import argparse
 import json
 import sys
 from collections.abc import Iterator
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from swarmpose.cli.common import DEFAULTS, positive_int
-from swarmpose.detect.registry import make_detector
-from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
-from swarmpose.sources.registry import open_source
+
+if TYPE_CHECKING:  # the sources and detectors are imported by the command that reads them
+    from swarmpose.sources.base import Frame, FrameSource
 
 
 def frame_record(frame: Frame, joints=None) -> dict:
@@ -42,6 +43,9 @@ def frame_record(frame: Frame, joints=None) -> dict:
 
 def probe_records(source: FrameSource, frames: int = 10, joints: str | None = None) -> Iterator[dict]:
     """Up to ``frames`` per-frame records (skipped frames as ``{index, timestamp_ns, skipped}``)."""
+    from swarmpose.detect.registry import make_detector
+    from swarmpose.sources.base import SkippedFrame
+
     detector = None
     if joints:
         detector = make_detector(joints, source)
@@ -116,6 +120,8 @@ def format_summary(s: dict, first: dict | None) -> str:
 def run_probe(uri: str, frames: int = 10, joints: str | None = None, as_json: bool = False, out=None) -> int:
     """Open ``uri``, read ``frames`` frames, print per-frame lines (JSON objects with ``as_json``,
     then a ``{"summary": …}`` object) or a readable report; returns the exit status (0)."""
+    from swarmpose.sources.registry import open_source
+
     out = out or sys.stdout
     with open_source(uri) as source:
         records = []

@@ -18,22 +18,26 @@ import sys
 import time
 from contextlib import ExitStack
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from swarmpose.cli.common import DEFAULTS, INTERRUPTED, INTERRUPTED_NOTE, quiet, seconds, stop_on_signals
 from swarmpose.cli.settings import add_flags, load
 from swarmpose.cli.track import add_source_argument, settings_of
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import leaves
-from swarmpose.messages.schema import keys
 from swarmpose.pipeline.config import ServiceConfig
-from swarmpose.pipeline.service import build_worker, format_summary, run_summary
-from swarmpose.pipeline.worker import Worker
+
+if TYPE_CHECKING:  # the worker and the protocol are imported by the commands that run them
+    from swarmpose.pipeline.worker import Worker
 
 REPLAY_DEFAULTS = {"zenoh_mode": "off"}
 REPLAY_SETTINGS = tuple(name for name in leaves(ServiceConfig) if name not in ("loop", "record"))
 """The settings ``replay`` takes: it writes into ``--out`` and ends with the recording."""
 def cmd_serve(args: argparse.Namespace) -> int:
     """Run the worker and publish over zenoh until the source ends or a signal comes."""
+    from swarmpose.messages.schema import keys
+    from swarmpose.pipeline.service import build_worker
+
     config = settings_of(args)
     with ExitStack() as stack:
         worker, _, _ = build_worker(config, stack, replay=False)
@@ -49,6 +53,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """Track a recording frame by frame into files; Δ and A(t) when it has ground truth."""
+    from swarmpose.pipeline.service import build_worker, format_summary, run_summary
+
     config = settings_of(args, REPLAY_DEFAULTS)
     with ExitStack() as stack:
         worker, parts, _ = build_worker(config, stack, replay=True, out=args.out, progress=not quiet(args))

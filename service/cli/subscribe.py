@@ -7,8 +7,7 @@ import sys
 
 from swarmpose.cli.common import DEFAULTS, non_negative_int, seconds
 from swarmpose.core.errors import SwarmposeError
-from swarmpose.messages.describe import format_status
-from swarmpose.publish.client import Client, add_zenoh_options, format_frame, say
+from swarmpose.publish.zenoh_options import add_zenoh_options
 
 
 def add_subscribe_args(p: argparse.ArgumentParser) -> None:
@@ -25,6 +24,9 @@ def add_subscribe_args(p: argparse.ArgumentParser) -> None:
 
 def cmd_subscribe(args: argparse.Namespace) -> int:
     """Print frames (and optionally status) until --count frames, --timeout, the workers' end or Ctrl-C."""
+    from swarmpose.messages.describe import format_status
+    from swarmpose.publish.client import Client, format_frame, say
+
     try:
         client = Client(args.camera, mode=args.mode, connect=args.connect, listen=args.listen,
                         multicast=not args.no_multicast, config_file=args.zenoh_config)

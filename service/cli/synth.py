@@ -10,19 +10,23 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from swarmpose.body.gltf_write import save_glb
-from swarmpose.body.loader import load_body
-from swarmpose.body.skinned import SkinnedBody
 from swarmpose.cli.common import DEFAULTS, add_body_options, positive_int, quiet
 from swarmpose.core.errors import ConfigError
-from swarmpose.motion.library import load_motion_spec
-from swarmpose.sim.scene import PersonSpec, load_people, load_scene_file, parse_person_spec
-from swarmpose.sim.synth import SynthConfig, synthesize, synthesize_people
+
+if TYPE_CHECKING:  # the body, motion and renderer are imported by the commands that use them
+    from swarmpose.body.skinned import SkinnedBody
+    from swarmpose.sim.scene import PersonSpec
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
     """Render a synthetic RGBD sequence with ground truth."""
+    from swarmpose.body.loader import load_body
+    from swarmpose.motion.library import load_motion_spec
+    from swarmpose.sim.scene import load_people
+    from swarmpose.sim.synth import SynthConfig, synthesize, synthesize_people
+
     config = SynthConfig(frames=args.frames, fps=args.fps, seed=args.seed, camera_distance=args.camera_distance,
                          camera_yaw_deg=args.camera_yaw, camera_height=args.camera_height,
                          layout=args.layout, skinning=args.skinning,
@@ -47,6 +51,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
 def scene_specs(args: argparse.Namespace) -> list[PersonSpec] | None:
     """The people of ``--person`` / ``--scene``, or None when neither is given (one ``--body``)."""
+    from swarmpose.sim.scene import load_scene_file, parse_person_spec
+
     if not args.person and not args.scene:
         return None
     if args.person and args.scene:
@@ -77,6 +83,9 @@ def print_synth_summary(summary: dict, body: SkinnedBody) -> None:
 
 def cmd_body(args: argparse.Namespace) -> int:
     """Describe a body model, optionally exporting it (personalised) to GLB."""
+    from swarmpose.body.gltf_write import save_glb
+    from swarmpose.body.loader import load_body
+
     body = load_body(args.body, args.shape)
     if args.lod:
         body = body.tracking_lod(args.lod)

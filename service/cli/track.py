@@ -16,17 +16,18 @@ import json
 import sys
 import threading
 from contextlib import ExitStack
+from typing import TYPE_CHECKING
 
-from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.cli.common import DEFAULTS, INTERRUPTED, INTERRUPTED_NOTE, quiet, stop_on_signals
 from swarmpose.cli.settings import add_flags, from_args
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import leaves
 from swarmpose.pipeline.config import ServiceConfig
-from swarmpose.pipeline.run import RunSummary, run_sequence
-from swarmpose.pipeline.service import Parts, format_accuracy, open_parts, score_summary
-from swarmpose.sim.evaluate import plot_accuracy
 from swarmpose.tracking.config import TrackerConfig
+
+if TYPE_CHECKING:  # what runs the commands is imported by them (the parser needs none of it)
+    from swarmpose.pipeline.run import RunSummary
+    from swarmpose.pipeline.service import Parts
 
 TRACK_SETTINGS = ("source", "detector", "models", "body", "shape", *leaves(TrackerConfig), "camera_id", "frames",
                   "overlay", "coordinates", "floor", "view", "view_url", "view_port", "rrd")
@@ -50,6 +51,9 @@ def settings_of(args: argparse.Namespace, defaults: dict | None = None) -> Servi
 
 def run_tracking(args: argparse.Namespace, *, score: bool) -> tuple[ServiceConfig, Parts, RunSummary]:
     """Open the parts of the command's settings, track every frame into ``--out``."""
+    from swarmpose.pipeline.run import run_sequence
+    from swarmpose.pipeline.service import open_parts
+
     config = settings_of(args)
     stop = threading.Event()
     with ExitStack() as stack:
@@ -78,6 +82,9 @@ def cmd_track(args: argparse.Namespace) -> int:
 
 def cmd_eval(args: argparse.Namespace) -> int:
     """Track a synthetic sequence and report Δ and A(t) against its ground truth."""
+    from swarmpose.body.skeleton import EVAL_JOINTS
+    from swarmpose.pipeline.service import format_accuracy, score_summary
+
     config, parts, run = run_tracking(args, score=True)
     accuracy = score_summary(parts) or {"mpjpe_mm": None, "coverage": 0.0, "A": {}, "per_joint_mm": []}
     t = config.tracker
@@ -90,6 +97,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if "people" in accuracy:
         result["people"] = accuracy["people"]
     if args.plot:
+        from swarmpose.sim.evaluate import plot_accuracy
+
         plot_accuracy({t.mode: {int(k): v for k, v in accuracy["A"].items()}}, args.plot, title=config.source)
         result["plot"] = args.plot
     if args.json:

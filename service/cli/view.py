@@ -18,15 +18,15 @@ from contextlib import ExitStack
 from swarmpose.cli.common import DEFAULTS, stop_on_signals
 from swarmpose.cli.settings import add_flags, from_args
 from swarmpose.pipeline.config import ServiceConfig
-from swarmpose.publish.rerun_files import log_recording
-from swarmpose.publish.rerun_stream import has_display
-from swarmpose.publish.rerun_view import DEPTH_STEP, open_view_sink
+from swarmpose.publish.rerun_view import DEPTH_STEP
 
 VIEW_SETTINGS = ("source", "camera_id", "view_url", "view_port", "rrd")
 
 
 def served(config: ServiceConfig) -> bool:
     """Whether the view is served from this process (no ``--rrd``, no ``--view-url``, no display)."""
+    from swarmpose.publish.rerun_stream import has_display
+
     return not config.rrd and not config.view_url and not has_display()
 
 
@@ -41,6 +41,9 @@ def wait_for_signal() -> None:
 
 def cmd_view(args: argparse.Namespace) -> int:
     """Log the recording into a .rrd file or a viewer."""
+    from swarmpose.publish.rerun_files import log_recording
+    from swarmpose.publish.rerun_view import open_view_sink
+
     config = from_args(ServiceConfig, args)
     sink = open_view_sink(config.camera_id, rrd=config.rrd, view=not config.rrd, url=config.view_url,
                           port=config.view_port, depth_step=args.depth_step)

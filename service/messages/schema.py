@@ -11,10 +11,12 @@ import functools
 import json
 import re
 from importlib import resources
-
-import jsonschema
+from typing import TYPE_CHECKING
 
 from swarmpose.core.errors import ConfigError, ProtocolError
+
+if TYPE_CHECKING:  # jsonschema is imported by the first validation
+    import jsonschema
 
 PROTOCOL_VERSION = 6
 """The protocol as a whole; raised whenever one message's version is."""
@@ -51,6 +53,8 @@ def schema(name: str) -> dict:
 
 @functools.cache
 def _validator(name: str) -> jsonschema.Draft202012Validator:
+    import jsonschema
+
     return jsonschema.Draft202012Validator(schema(name))
 
 

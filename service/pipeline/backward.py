@@ -151,7 +151,8 @@ class BackwardPass:
             return refit
         tracker = self._tracker_for(steps[last])
         start = forward[steps[last].frame.index].pose
-        tracker.previous, tracker.history, tracker.age = start.copy(), [start.copy()], SETTLED_AGE
+        tracker.previous, tracker.age = start.copy(), SETTLED_AGE
+        tracker.history.restart(start.copy())
         tracker.body_id = body_id
         for step in reversed(steps[:last]):
             if self.stop is not None and self.stop.is_set():

@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import check_settings, section, setting
-from swarmpose.messages.schema import check_camera_id
 from swarmpose.tracking.config import TrackerConfig
 
 ZENOH_MODES = ("peer", "client", "off")
@@ -66,6 +65,10 @@ class ServiceConfig:
     rate: float = setting(0.0, "deliver a recording at this many frames/s (0: as recorded for serve, as fast as "
                                "possible otherwise; live cameras set their own rate)", minimum=0.0)
     loop: bool = setting(False, "start a recording over when it ends (serve)")
+    frame_budget_ms: float = setting(100.0, "serve: the time a frame's tracking may take, ms: each frame's search "
+                                            "and polish are sized to it (shared by the people in view), so the "
+                                            "poses keep up with the camera (0: the full search every frame)",
+                                     minimum=0.0)
     record: str = setting("", "serve: also write poses.jsonl/csv/bvh and overlay.mp4 into this folder")
     status_period_s: float = setting(1.0, "seconds between status messages", minimum=0.01)
     health_file: str = setting("", "also write each status message here (for `swarmpose health`)")
@@ -81,6 +84,8 @@ class ServiceConfig:
                            "(open it with `rerun FILE.rrd`)")
 
     def __post_init__(self) -> None:
+        from swarmpose.messages.schema import check_camera_id  # here: the messages package loads scipy
+
         check_camera_id(self.camera_id)
         check_settings(self)
 

@@ -35,7 +35,7 @@ from swarmpose.publish.rerun_view import open_view_sink
 from swarmpose.publish.sink import Sink
 from swarmpose.publish.zenoh_link import ZenohSink
 from swarmpose.sim.scoring import ScoreSink
-from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
+from swarmpose.sources.base import DeferredFrame, Frame, FrameSource, SkippedFrame
 from swarmpose.sources.registry import open_source
 from swarmpose.tracking.auto_height import ESTIMATES as HEIGHT_ESTIMATES
 from swarmpose.tracking.auto_height import HeightFittingTracker, applies
@@ -182,7 +182,7 @@ class ProgressSink:
 
 def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: str = "",
                  progress: bool = False, sinks: Sequence[Sink] = (),
-                 on_acquired: Callable[[Frame | SkippedFrame, int], None] | None = None,
+                 on_acquired: Callable[[Frame | SkippedFrame | DeferredFrame, int], None] | None = None,
                  ) -> tuple[Worker, Parts, ZenohSink | None]:
     """The worker of ``config`` with its sinks: zenoh (unless ``zenoh_mode`` is off), the replay
     files (``out`` or ``record``), the ground-truth scorer, the log, the health file, (with
@@ -231,6 +231,12 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
         pace = config.rate or None
     else:
         pace = None if parts.source.live else (config.rate or parts.fps)
+        if pace and not config.rate and not (parts.source.rate_known and getattr(parts.source, "fps", 0)):
+            log.warning("%s records no frame rate (a sequence folder's sequence.json \"fps\"); serving it at "
+                        "%g frames/s, its frames stamped so; pass --rate to serve it at another", config.source,
+                        parts.fps)
+        for pipeline in getattr(parts.pipeline, "members", [parts.pipeline]):  # live: keep up with the camera
+            pipeline.frame_period_s, pipeline.budget_ms = 1.0 / parts.fps, config.frame_budget_ms
     uri = config.source
     worker = Worker(lambda: open_source(uri), parts.pipeline, sinks, camera=config.camera_id, drop_stale=not replay,
                     pace_fps=pace, loop=config.loop and not replay, frames=config.frames,

@@ -134,6 +134,10 @@ class FramePipeline:
         self._boxes: list[np.ndarray] = []  # the last frame's tracked bodies' joint boxes (several people)
         self._floor = FloorCache()
         self.velocities = JointVelocities()
+        self.frame_period_s: float | None = None
+        """The camera's frame period (s), given to every tracker (live: frames dropped widen the search)."""
+        self.budget_ms = 0.0
+        """The time a frame's tracking may take (ms), shared by its people (live; 0: the configured search)."""
         self._box_lock = threading.Lock()
         self._warned_empty = False  # a depth image without valid pixels is logged once
 
@@ -253,7 +257,7 @@ class FramePipeline:
 
     def _new_tracker(self, intrinsics: Intrinsics, body_id: int) -> BodyTracker:
         tracker = self.make_tracker(intrinsics, body_id)
-        tracker.on_step = self.on_step
+        tracker.on_step, tracker.frame_period_s, tracker.budget_ms = self.on_step, self.frame_period_s, self.budget_ms
         return tracker
 
     def _track_people(self, frame: Frame, detection: Detection, received_ns: int, t0: float) -> FrameResult:
@@ -268,6 +272,7 @@ class FramePipeline:
                                             counts=None if old is None else old.counts)
                 self.intrinsics = intrinsics
             labels = None if detection.segmentation is None else detection.segmentation.labels
+            self.people.budget_ms = self.budget_ms / max(len(detection.people), 1)
             bodies = self.people.step(frame, detection.people, labels)
         except Exception as exc:  # a frame that fails to track (not one person's fit): every track restarts
             if self.people is not None:

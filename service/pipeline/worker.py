@@ -9,7 +9,8 @@ Detection and tracking are the two halves of the one per-frame step
 
 * **live** (``drop_stale=True``, ``swarmpose serve``): a slot holds only the newest frame;
   when a stage is slower than the camera, the waiting older frame is dropped and counted,
-  so the tracker always works on the newest frame;
+  so the tracker always works on the newest frame; detection takes its frame just in time for
+  the tracker (:mod:`~.schedule`);
 * **replay** (``drop_stale=False``, ``swarmpose replay``): a full slot makes the stage before
   it wait; every frame is processed, as fast as the slowest stage goes.
 
@@ -39,10 +40,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from swarmpose.pipeline.handover import END, Handover
+from swarmpose.pipeline.schedule import JustInTime
 from swarmpose.pipeline.status import WorkerStats, status_message
 from swarmpose.pipeline.step import Detection, FramePipeline, describe_error, skipped_result
 from swarmpose.publish.sink import Sink
-from swarmpose.sources.base import Frame, FrameSource, SkippedFrame, exc_message
+from swarmpose.sources.base import DeferredFrame, Frame, FrameSource, SkippedFrame, exc_message, warn_skipped
 
 log = logging.getLogger(__name__)
 MAX_ERRORS = 20
@@ -54,7 +56,7 @@ ACQUIRE_JOIN_S = 2.0
 class Received:
     """A source item with the wall-clock time (ns) acquisition took it, and its detection."""
 
-    item: Frame | SkippedFrame
+    item: Frame | SkippedFrame | DeferredFrame
     received_ns: int
     detection: Detection | None = None
     detected_ns: int = 0
@@ -79,7 +81,7 @@ class Worker:
                  frames: int = 0, status_period_s: float = 1.0, reopen_s: float = 5.0, source_uri: str = "",
                  detector_spec: str = "", zenoh_state: Callable[[], dict] | None = None,
                  source: FrameSource | None = None,
-                 on_acquired: Callable[[Frame | SkippedFrame, int], None] | None = None):
+                 on_acquired: Callable[[Frame | SkippedFrame | DeferredFrame, int], None] | None = None):
         self.open_source, self.pipeline, self.sinks = open_source, pipeline, list(sinks)
         self.on_acquired = on_acquired
         self.camera, self.drop_stale, self.pace_fps, self.loop = camera, drop_stale, pace_fps, loop
@@ -93,6 +95,8 @@ class Worker:
         self.sink_errors: list[str] = []
         """One line per sink that failed on a frame (it got nothing more)."""
         self._live_sinks = list(self.sinks)
+        self._deferred_skips = 0
+        self._timing = JustInTime()
         self._stop = threading.Event()
         self._done = threading.Event()
         self._lock = threading.Lock()
@@ -231,6 +235,7 @@ class Worker:
     def _read_all(self, source: FrameSource) -> None:
         start_wall, start_capture = None, None
         pace = self.pace_fps and not source.live
+        source.defer = bool(pace and self.drop_stale and source.can_defer)  # decode only the frames kept
         if self._enough():
             return
         for item in source:
@@ -254,13 +259,22 @@ class Worker:
     def _detect(self) -> None:
         try:
             while True:
+                if self.drop_stale and self._stop.wait(self._timing.wait_s()):  # live: just in time for tracking
+                    return
                 got = self._acquired.get()
                 if got is END:
                     return
                 if not self.drop_stale:
                     got.received_ns = time.time_ns()  # replay reads ahead: count latency from here
+                if isinstance(got.item, DeferredFrame):  # a recording's frame, read now that it is taken
+                    got.item = got.item.read()
+                    if isinstance(got.item, SkippedFrame):
+                        self._deferred_skips += 1
+                        warn_skipped(self.source_uri, got.item, self._deferred_skips)
                 if isinstance(got.item, Frame):
+                    started = time.monotonic()
                     got.detection = self.pipeline.detect(got.item)
+                    self._timing.detected(time.monotonic() - started)
                     if got.detection.note:
                         self.stats.update(detector_errors=1, detector_error=got.detection.note)
                         self.report(got.detection.note)
@@ -278,7 +292,9 @@ class Worker:
                     return
                 if not self.drop_stale:  # replay: leave out the wait for the previous frame's tracking
                     got.received_ns += time.time_ns() - got.detected_ns
+                self._timing.tracking()
                 self._publish(got)
+                self._timing.tracked()
         finally:
             self._done.set()
 

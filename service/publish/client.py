@@ -17,7 +17,6 @@ is counted in ``client.rejected`` with its error in ``client.last_error`` and no
 
 from __future__ import annotations
 
-import argparse
 import queue
 import sys
 import threading
@@ -27,6 +26,7 @@ from collections.abc import Callable, Iterator, Sequence
 from swarmpose.core.errors import ProtocolError
 from swarmpose.messages import check_camera_id, decode, keys, validate
 from swarmpose.publish.zenoh_link import open_session, zenoh_config
+from swarmpose.publish.zenoh_options import add_zenoh_options  # noqa: F401 (the client's tools take them from here)
 
 QUEUE_SIZE = 256
 _WORKERS_ENDED: dict = {"schema": "swarmpose.client.workers-ended"}
@@ -213,13 +213,3 @@ def say(line: str) -> None:
     """Print one whole line at once (zenoh's callback thread prints too)."""
     sys.stdout.write(line + "\n")
     sys.stdout.flush()
-
-
-def add_zenoh_options(p: argparse.ArgumentParser) -> None:
-    """--mode/--connect/--listen/--no-multicast/--zenoh-config, as zenoh's own tools have them."""
-    p.add_argument("--mode", choices=("peer", "client"), default="peer", help="zenoh mode (default peer)")
-    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
-                   help="zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
-    p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT", help="zenoh endpoint to listen on")
-    p.add_argument("--no-multicast", action="store_true", help="turn zenoh multicast scouting off")
-    p.add_argument("--zenoh-config", default="", help="a zenoh JSON5 configuration file")

@@ -75,6 +75,20 @@ class SkippedFrame:
     reason: str
 
 
+@dataclass(frozen=True)
+class DeferredFrame:
+    """A frame of a recording whose images are not read yet: its index, capture time, and
+    ``read()``, which reads them (a :class:`Frame`, or a :class:`SkippedFrame` saying why not).
+
+    Served at its rate (``serve``), a recording's frames come faster than the tracker takes them
+    and most are dropped; a source with ``can_defer`` yields these while ``defer`` is set, so that
+    only the frames the tracker takes are decoded."""
+
+    index: int
+    timestamp_ns: int
+    read: Callable[[], Frame | SkippedFrame]
+
+
 class FrameSource:
     """Base class of frame sources. Subclasses implement :meth:`_frames` and may override :meth:`close`.
 
@@ -87,6 +101,11 @@ class FrameSource:
     length: int | None = None
     status: str = "open"
     live: bool = False
+    rate_known: bool = True
+    """False when the source's frame rate (``fps``) and timestamps were assumed, not recorded."""
+    can_defer: bool = False
+    defer: bool = False
+    """With ``can_defer``: yield :class:`DeferredFrame` items instead of frames (see there)."""
 
     def _frames(self) -> Iterator[Frame | SkippedFrame]:
         raise NotImplementedError
@@ -96,7 +115,7 @@ class FrameSource:
         delivered, skipped, first_skip = False, 0, None
         try:
             for item in self._frames():
-                delivered = delivered or isinstance(item, Frame)
+                delivered = delivered or isinstance(item, (Frame, DeferredFrame))
                 if isinstance(item, SkippedFrame):
                     skipped += 1
                     first_skip = first_skip or item

@@ -26,6 +26,7 @@ unregistered images or of pictures of the depth, not a damaged frame.
 
 from __future__ import annotations
 
+import functools
 import json
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -36,7 +37,7 @@ import numpy as np
 
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import AssetError, SourceError
-from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
+from swarmpose.sources.base import DeferredFrame, Frame, FrameSource, SkippedFrame
 from swarmpose.sources.groundtruth import GroundTruth, load_ground_truth
 from swarmpose.sources.imagefiles import MILLIMETRES, check_pair, image_size, load_intrinsics, read_color, read_depth
 
@@ -66,8 +67,11 @@ class FolderSource(FrameSource):
     skipped ones included), ``fps`` (Hz: ``sequence.json``'s, or TUM's median depth rate),
     ``intrinsics``, ``ground_truth`` (:class:`~swarmpose.sources.groundtruth.GroundTruth` from
     ``groundtruth.jsonl``, None if absent), ``recorded_body`` (the name of the body
-    ``swarmpose synth`` rendered, from ``sequence.json``; "" when not recorded).
+    ``swarmpose synth`` rendered, from ``sequence.json``; "" when not recorded). Can defer the
+    reading of its images (:class:`~swarmpose.sources.base.DeferredFrame`).
     """
+
+    can_defer = True
 
     def __init__(self, folder: Path | str, uri: str | None = None):
         self.folder = Path(folder).expanduser()
@@ -102,6 +106,7 @@ class FolderSource(FrameSource):
         meta = self._sequence_json()
         self.recorded_body = str(meta.get("body") or "")
         fps = float(meta.get("fps", DEFAULT_FPS))
+        self.rate_known = "fps" in meta
         if not fps > 0:
             raise SourceError(f"{self.folder / 'sequence.json'}: fps must be positive, got {fps}")
         units = float(meta.get("depth_scale", MILLIMETRES))
@@ -232,19 +237,23 @@ class FolderSource(FrameSource):
 
     # -- frames ------------------------------------------------------------------------------
 
-    def _frames(self) -> Iterator[Frame | SkippedFrame]:
+    def _frames(self) -> Iterator[Frame | SkippedFrame | DeferredFrame]:
         for e in self._entries:
             if e.reason is not None:
                 yield SkippedFrame(e.index, e.timestamp_ns, e.reason)
-                continue
-            try:
-                depth = read_depth(e.depth, self._units)
-                color = read_color(e.color)
-            except SourceError as exc:
-                yield SkippedFrame(e.index, e.timestamp_ns, str(exc))
-                continue
-            mismatch = check_pair(depth, color, f"frame {e.index} ({e.depth.name})", self.intrinsics)
-            if mismatch is not None:
-                yield SkippedFrame(e.index, e.timestamp_ns, mismatch)
-                continue
-            yield Frame(e.index, e.timestamp_ns, depth, color, self.intrinsics)
+            elif self.defer:
+                yield DeferredFrame(e.index, e.timestamp_ns, functools.partial(self._read, e))
+            else:
+                yield self._read(e)
+
+    def _read(self, e: _Entry) -> Frame | SkippedFrame:
+        """The frame of entry ``e``, or why it cannot be read."""
+        try:
+            depth = read_depth(e.depth, self._units)
+            color = read_color(e.color)
+        except SourceError as exc:
+            return SkippedFrame(e.index, e.timestamp_ns, str(exc))
+        mismatch = check_pair(depth, color, f"frame {e.index} ({e.depth.name})", self.intrinsics)
+        if mismatch is not None:
+            return SkippedFrame(e.index, e.timestamp_ns, mismatch)
+        return Frame(e.index, e.timestamp_ns, depth, color, self.intrinsics)

@@ -51,11 +51,13 @@ from swarmpose.sources.base import Frame
 from swarmpose.tracking import search, verdict
 from swarmpose.tracking.arm_proposals import arm_proposals
 from swarmpose.tracking.body_scene import body_scene
+from swarmpose.tracking.budget import POLISH_CANDIDATES, FrameBudget
 from swarmpose.tracking.config import MODE_WEIGHTS, TrackerConfig
 from swarmpose.tracking.hidden_lifts import without_hidden_lifts
+from swarmpose.tracking.history import TrackHistory
 from swarmpose.tracking.hypotheses import MERGE_SHARE, hypothesis_groups
 from swarmpose.tracking.init_pose import FACINGS_DEG, NO_TORSO, torso_pose, turned
-from swarmpose.tracking.lift import lift_eval_joints
+from swarmpose.tracking.lift import lifted_body
 from swarmpose.tracking.limb_flips import limb_flips
 from swarmpose.tracking.objective import JointTargets, Objective, search_split
 from swarmpose.tracking.one_euro import PoseFilter
@@ -63,14 +65,12 @@ from swarmpose.tracking.pose_polish import polish_solution
 from swarmpose.tracking.pso import PsoConfig, PsoResult, minimise
 from swarmpose.tracking.result import BodyResult, lost_body
 
-HISTORY = 5
-"""Previous solutions injected as particles."""
 REPLACED_TURN_DEG = 90.0
 """A frame's solution turned this far (root rotation, degrees) from the last frame's is a
 challenger to the track (a re-check's or the start's other facing won): no body turns that far
 in one frame. It replaces the track only when it wins two frames running (the frame between
 publishes the best solution of the track's own facing), and then the old track's poses are
-dropped from :data:`HISTORY`. One frame's detection that swapped sides (people seen from
+dropped from the history (:mod:`swarmpose.tracking.history`). One frame's detection that swapped sides (people seen from
 behind) flipped tracks either way: kept as seeds, the old poses won back a mirrored facing;
 accepted at once, a mirrored re-check replaced a right track (BENCHMARKS.md, issue 12)."""
 
@@ -113,7 +113,7 @@ class BodyTracker:
             context = context or ClContext.for_spec(config.device)
             scorer = ParticleScorer(self.body, intrinsics, config.tile, threshold=config.threshold_m, context=context)
             self.objective = Objective(self.body, intrinsics, scorer, self.weights, self._coarse_scorer(context))
-        self.history: list[np.ndarray] = []
+        self.history = TrackHistory()
         self.previous: np.ndarray | None = None
         self.age = 0  # frames tracked since the track's start (0 on the start's frame)
         self.challenger: np.ndarray | None = None
@@ -124,6 +124,9 @@ class BodyTracker:
                        if config.smoothing == "one-euro" else None)
         """The published poses' filter (``--smoothing one-euro``); the search never sees its output."""
         self.lo, self.hi = search.pose_bounds()
+        self.frame_period_s: float | None = None  # the camera's (s): dropped frames widen the search (None: none)
+        self.budget_ms = 0.0  # the time a frame may take (ms, live: tracking.budget); 0: the configured search
+        self.costs = FrameBudget()
 
     @property
     def device_name(self) -> str:
@@ -197,7 +200,7 @@ class BodyTracker:
                                 "file for the whole sequence")
         depth = observed_depth(depth)
         if self.config.mode == "lift":
-            return self._lift(depth, joints, t0)
+            return lifted_body(self.body_id, depth, self.intrinsics, joints, self.config.min_score, t0)
         least = start_min_score if self.previous is None and start_min_score is not None else self.config.min_score
         targets = JointTargets.from_detection(joints, depth, self.intrinsics, self.body, least)
         has_depth = bool(np.any(depth > 0))
@@ -212,6 +215,12 @@ class BodyTracker:
 
         rng = np.random.default_rng([self.config.seed, frame.index])
         pso = self.config.pso_config
+        if state == "tracking":  # live: the swarm and the polish sized to the frame's time
+            generations, self.polish_rounds = self.costs.plan(self.budget_ms, pso.particles, pso.generations,
+                                                              self.config.polish)
+            pso = replace(pso, generations=generations)
+        else:
+            self.polish_rounds = self.config.polish
         timings: dict[str, float] = {}
         proposals: list[np.ndarray] = []  # limb flips and arm proposals (tracking only)
         if state == "init":
@@ -228,13 +237,15 @@ class BodyTracker:
             if hidden:
                 with timed(timings, "hidden"):
                     targets = without_hidden_lifts(self.body, centre, targets, self.intrinsics, scene)
-            recheck = self._recheck(frame.index, lifted, targets, depth, rng, timings)
+            recheck = self._recheck(frame.index, lifted, targets, depth, rng, timings, pso.generations)
             torso = torso_pose(self.body, lifted, centre[7:], upright=False)
             offset = np.abs(torso[:3] - centre[:3]) if torso is not None else np.zeros(3)
             radius = search.angle_radius(self.body, self.intrinsics, centre, targets)
-            start = search.spread(centre, pso.particles, rng, 0.04 + offset, 0.15, radius)
-            seeds = ([centre] + ([self.challenger] if self.challenger is not None else [])
-                     + self.history[-HISTORY:][::-1] + ([torso] if torso is not None else []) + recheck)
+            ahead = self.history.periods_since(frame.timestamp_ns, self.frame_period_s)  # > 1: frames dropped
+            start = search.spread(centre, pso.particles, rng, 0.04 * np.sqrt(ahead) + offset, 0.15, radius)
+            seeds = ([centre] + self.history.predicted(frame.timestamp_ns, ahead)
+                     + ([self.challenger] if self.challenger is not None else [])
+                     + self.history.newest_first() + ([torso] if torso is not None else []) + recheck)
             box = self.search_box(centre, targets)
             room = pso.particles - len(seeds)
             if arms and room > 0:  # as many as the swarm has room for
@@ -246,7 +257,6 @@ class BodyTracker:
                     proposals += limb_flips(self.body, centre, most=room)
         for i, s in enumerate((seeds + proposals)[:pso.particles]):
             start[i] = s
-
         t1 = time.perf_counter()
         self.objective.set_frame(depth, box, targets, centre)
         groups = None
@@ -259,7 +269,7 @@ class BodyTracker:
         timings["pso"] = 1000 * (time.perf_counter() - t1) - timings.get("hypotheses", 0.0)
         timings.update(search_split(self.objective.take_spent(), timings["pso"]))
         with timed(timings, "polish"):  # polish 0: as it is; a young track: a duel
-            best = polish_solution(self.objective, result, self.previous, self.config.polish, rng,
+            best = polish_solution(self.objective, result, self.previous, self.polish_rounds, rng,
                                    self.age < max(YOUNG_RECHECKS), self._hold_facing, REPLACED_TURN_DEG)
         t_verdict = time.perf_counter()
         self.objective(best[None])
@@ -273,13 +283,15 @@ class BodyTracker:
         else:
             self.age = 0 if self.previous is None else self.age + 1
             self.previous = best
-            self.history.append(best)
-            del self.history[:-HISTORY]
+            self.history.add(best, frame.timestamp_ns)
         joints3d = self.body.posed_points(best[None], EVAL_JOINTS)[0]
         joints2d = self.intrinsics.project(joints3d)
         conf = verdict.confidence(self.objective, tile, joints2d, joints, targets, self.config.min_score)
         timings["verdict"] = 1000 * (time.perf_counter() - t_verdict)
         timings["total"] = 1000 * (time.perf_counter() - t0)
+        if state == "tracking":
+            self.costs.record(timings["pso"] + timings["polish"],
+                              result.evaluations + POLISH_CANDIDATES * self.polish_rounds, timings["total"])
         result = BodyResult(self.body_id, out_state, reason, best, joints3d, joints2d, conf, parts, timings, joints)
         if self.filter is None or out_state == "lost":
             return result
@@ -313,15 +325,6 @@ class BodyTracker:
         joints3d = self.body.posed_points(pose[None], EVAL_JOINTS)[0]
         return replace(result, pose=pose, joints3d=joints3d, joints2d=self.intrinsics.project(joints3d),
                        unfiltered=result)
-
-    def _lift(self, depth: np.ndarray, joints: Joints2D | None, t0: float) -> BodyResult:
-        j3 = lift_eval_joints(depth, self.intrinsics, joints, self.config.min_score)
-        ok = np.all(np.isfinite(j3), axis=1)
-        j2 = self.intrinsics.project(np.where(np.isfinite(j3), j3, 1.0))
-        j2[~ok] = np.nan
-        state, reason = ("tracking", "") if ok.any() else ("lost", "no joints detected with depth")
-        return BodyResult(self.body_id, state, reason, None, j3, j2, ok.astype(float), {},
-                          {"total": 1000 * (time.perf_counter() - t0)}, joints)
 
     def _lost(self, reason: str, t0: float, joints: Joints2D | None = None) -> BodyResult:
         self.reset()
@@ -380,17 +383,17 @@ class BodyTracker:
         return [fits[k] for k in np.argsort(energy)]
 
     def _recheck(self, index: int, lifted: dict[str, np.ndarray], targets: JointTargets, depth: np.ndarray,
-                 rng: np.random.Generator, timings: dict[str, float]) -> list[np.ndarray]:
+                 rng: np.random.Generator, timings: dict[str, float], generations: int) -> list[np.ndarray]:
         """Every ``config.recheck`` frames and on a young track's :data:`YOUNG_RECHECKS` frames,
-        the start's facings refitted from the detection on a quarter of the budget: they join the
-        swarm as particles, so a track locked in a wrong facing or limb configuration is
+        the start's facings refitted from the detection on a quarter of the frame's ``generations``:
+        they join the swarm as particles, so a track locked in a wrong facing or limb configuration is
         replaced as soon as they explain the frame better."""
         if not recheck_due(index, self.age + 1, self.config.recheck) or targets.count == 0:  # this frame's age
             return []
         centre = torso_pose(self.body, lifted, self.body.rest_angles)
         if centre is None:
             return []
-        return self._initialise(centre, targets, depth, rng, timings, max(self.config.generations // 4, 1))[:2]
+        return self._initialise(centre, targets, depth, rng, timings, max(generations // 4, 1))[:2]
 
     def _search(self, objective: Objective, start: np.ndarray, rng: np.random.Generator, pso: PsoConfig,
                 groups: np.ndarray | None = None) -> PsoResult:

@@ -4,11 +4,14 @@ every command's flags, the TOML file and ``SWARMPOSE_*`` (see :mod:`swarmpose.co
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import check_settings, setting
-from swarmpose.tracking.objective import ObjectiveWeights
 from swarmpose.tracking.pso import VARIANTS, PsoConfig
+
+if TYPE_CHECKING:  # the objective (body model, scipy) is imported where the weights are asked for
+    from swarmpose.tracking.objective import ObjectiveWeights
 
 MODES = ("hybrid", "depth", "joints", "lift")
 SMOOTHING = ("off", "one-euro", "centred")
@@ -152,6 +155,8 @@ class TrackerConfig:
     @property
     def weights(self) -> ObjectiveWeights:
         """w_D, w_J (the mode's unless given), alpha, T and the score threshold."""
+        from swarmpose.tracking.objective import ObjectiveWeights
+
         w_d, w_j = MODE_WEIGHTS.get(self.mode, (0.0, 1.0))
         return ObjectiveWeights(depth=w_d if self.depth_weight is None else self.depth_weight,
                                 joints=w_j if self.joints_weight is None else self.joints_weight,

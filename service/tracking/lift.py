@@ -13,11 +13,14 @@ the others (it slipped onto the background), lifts to NaN (it keeps its 2D term)
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.core.camera import Intrinsics
 from swarmpose.detect.joints import Joints2D
+from swarmpose.tracking.result import BodyResult
 
 JOINT_RADIUS: dict[str, float] = {
     "head": 0.09, "nose": 0.0, "left_eye": 0.0, "right_eye": 0.0, "left_ear": 0.02, "right_ear": 0.02,
@@ -117,3 +120,16 @@ def lift_eval_joints(depth: np.ndarray, intrinsics: Intrinsics, joints: Joints2D
     if "neck" not in lifted and "left_shoulder" in lifted and "right_shoulder" in lifted:
         lifted["neck"] = (lifted["left_shoulder"] + lifted["right_shoulder"]) / 2.0
     return np.array([lifted.get(j, np.full(3, np.nan)) for j in EVAL_JOINTS])
+
+
+def lifted_body(body_id: int, depth: np.ndarray, intrinsics: Intrinsics, joints: Joints2D | None, min_score: float,
+                started: float) -> BodyResult:
+    """The ``lift`` mode's result for one frame: J^e of the evaluation joints as the answer, no model
+    (state lost when no joint lifts); ``started``: the frame's ``time.perf_counter()`` at its start."""
+    j3 = lift_eval_joints(depth, intrinsics, joints, min_score)
+    ok = np.all(np.isfinite(j3), axis=1)
+    j2 = intrinsics.project(np.where(np.isfinite(j3), j3, 1.0))
+    j2[~ok] = np.nan
+    state, reason = ("tracking", "") if ok.any() else ("lost", "no joints detected with depth")
+    return BodyResult(body_id, state, reason, None, j3, j2, ok.astype(float), {},
+                      {"total": 1000 * (time.perf_counter() - started)}, joints)

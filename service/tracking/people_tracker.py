@@ -130,6 +130,7 @@ class PeopleTracker:
         self.counts = counts or PeopleCounts()
         self._next_id = int(first_id)
         self._spare: list[BodyTracker] = []  # trackers of retired or refused tracks, reused (no new scorer)
+        self.budget_ms = 0.0  # each person's share of a frame's time (ms, live); 0: the configured search
 
     @property
     def device_name(self) -> str:
@@ -223,6 +224,7 @@ class PeopleTracker:
         """One person's tracker on ``seen`` (``frame``, or a copy with other people's depth
         removed); None (and the tracker restarted) when it throws. start_min_score: as
         :meth:`BodyTracker.step` takes it."""
+        tracker.budget_ms = self.budget_ms
         try:
             return tracker.step(seen, joints, others_removed=seen is not frame, start_min_score=start_min_score)
         except Exception as exc:  # one person's failure must not cost the others their fit

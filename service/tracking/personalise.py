@@ -95,6 +95,7 @@ from swarmpose.tracking import shape_stature
 from swarmpose.tracking.body_tracker import BodyTracker, observed_depth
 from swarmpose.tracking.config import TrackerConfig
 from swarmpose.tracking.depth_dropouts import fill_dropouts
+from swarmpose.tracking.fit_settings import FitSettings
 from swarmpose.tracking.lift_bias import LIMB_BONES, lift_bias, typical_depth
 from swarmpose.tracking.objective import JointTargets, Objective
 from swarmpose.tracking.own_pose_search import FIRST_STEP, LEAST_STEP, compass_search, own_pose_energy
@@ -114,35 +115,6 @@ class ShapeSample:
     frame: Frame
     joints: Joints2D | None
     pose: np.ndarray
-
-
-BONE_WEIGHT = 5.0
-"""w_B: the bone-length term's weight per cm of mean difference."""
-
-
-SWEEP = {"gender": (0.0, 1.0), "height": (0.2, 0.5, 0.8)}
-"""Stage 0's grid (see :func:`_sweep`): parameters by name, 0..1 (the built-in body's height is its
-0..1 slider over 1.45-2.05 m; it has no gender)."""
-
-
-@dataclass(frozen=True)
-class FitSettings:
-    """How hard :func:`fit_shape` works: key frames, alternation rounds, the shape PSO's particles and
-    generations, the fit's depth tile (finer than tracking's: it runs once), the seed, the last stage's budget."""
-
-    keyframes: int = 12
-    rounds: int = 3
-    particles: int = 16
-    generations: int = 16
-    tile: tuple[int, int] = (96, 96)  # falls back to the tracker's where the device lacks local memory
-    seed: int = 0
-    pose_steps: int = 2
-    bone_weight: float = BONE_WEIGHT
-    debias_lift: bool = True  # take the lift's own lengthening (lift_bias) off the observed limb lengths
-    stature_weight: float = shape_stature.WEIGHT  # E_H (0: off), see shape_stature
-    sweep: dict[str, tuple[float, ...]] = field(default_factory=lambda: dict(SWEEP))
-    own_pose_rounds: int = 60  # the last stage's polish per key frame and candidate (0: no last stage)
-    own_pose_candidates: int = 40  # its budget of candidates (own_pose_search.compass_search; 0: no last stage)
 
 
 @dataclass
@@ -277,11 +249,12 @@ body had it would tie the fit to the start shape (female-tall came out 5.6 cm sh
 
 
 def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Intrinsics, config: TrackerConfig,
-              settings: FitSettings = FitSettings(), context: ClContext | None = None,
+              settings: FitSettings | None = None, context: ClContext | None = None,
               progress: Callable[[str], None] | None = None) -> ShapeFit:
     """The shape of the person in ``samples`` (see the module docstring). ``config``: the
     tracker's settings (its weights, search budget and device); PersonalisationError when
     fewer than :data:`MIN_FRAMES` samples have a pose."""
+    settings = settings or FitSettings()
     t0 = time.perf_counter()
     usable = [s for s in samples if s.pose is not None and np.all(np.isfinite(s.pose))]
     if len(usable) < MIN_FRAMES:
@@ -341,7 +314,8 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
             pose = key.best_pose
             for _ in range(settings.pose_steps):
                 tracker.reset()
-                tracker.previous, tracker.history = pose, [pose]
+                tracker.previous = pose
+                tracker.history.restart(pose)
                 result = tracker.step(key.sample.frame, key.sample.joints)
                 if result.pose is not None and result.state != "lost":
                     pose = np.asarray(result.pose, float)

@@ -106,3 +106,24 @@ def angle_radius(body: SkinnedBody, intrinsics: Intrinsics, centre: np.ndarray, 
         if moved:
             radius[cols - 7] = np.clip(ANGLE_RADIUS[0] + max(moved), *ANGLE_RADIUS)
     return radius
+
+
+MAX_PREDICTED_STEPS = 4.0
+"""A constant-velocity prediction looks at most this many of the last step's lengths ahead."""
+
+
+def predicted_pose(previous: np.ndarray, before: np.ndarray, step_s: float, ahead_s: float) -> np.ndarray:
+    """The pose (36,) ``ahead_s`` seconds after ``previous`` (36,) if it goes on as it came from
+    ``before`` (36,), ``step_s`` seconds earlier: translation and joint angles moved linearly
+    (angles clipped to their limits), the root turned on by the same rotation per second; at
+    most :data:`MAX_PREDICTED_STEPS` steps ahead."""
+    previous, before = np.asarray(previous, float), np.asarray(before, float)
+    ratio = min(max(ahead_s, 0.0) / step_s, MAX_PREDICTED_STEPS) if step_s > 0 else 0.0
+    out = previous.copy()
+    out[:3] += ratio * (previous[:3] - before[:3])
+    out[7:] = np.clip(previous[7:] + ratio * (previous[7:] - before[7:]), ANGLE_LIMITS[:, 0], ANGLE_LIMITS[:, 1])
+    now = Rotation.from_matrix(quaternion_to_matrix(previous[ROOT_QUATERNION]))
+    turn = now * Rotation.from_matrix(quaternion_to_matrix(before[ROOT_QUATERNION])).inv()
+    q = matrix_to_quaternion((Rotation.from_rotvec(ratio * turn.as_rotvec()) * now).as_matrix())
+    out[ROOT_QUATERNION] = q * np.sign(q @ previous[ROOT_QUATERNION] + 1e-12)
+    return out

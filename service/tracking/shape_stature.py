@@ -30,6 +30,7 @@ import numpy as np
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.tracking.body_tracker import observed_depth
+from swarmpose.tracking.fit_settings import STATURE_WEIGHT
 from swarmpose.tracking.objective import JointTargets
 from swarmpose.tracking.stature import upright_stature
 
@@ -39,9 +40,8 @@ MIN_MEASURES = 3
 BAND = (-0.003, 0.015)
 """Rest heights from ``H·(1 + BAND[0])`` to ``H·(1 + BAND[1])`` cost nothing (``H``: the measured
 stature; see the module docstring)."""
-WEIGHT = 1.0
-"""Energy per cm that a body's rest height lies outside the band: about three times the slope of
-the fit's own energy over height, so the band bounds the fit and the objective chooses inside it."""
+WEIGHT = STATURE_WEIGHT
+"""Energy per cm that a body's rest height lies outside the band (declared in :mod:`~.fit_settings`)."""
 
 
 def measured_stature(samples: Sequence, body: SkinnedBody, intrinsics: Intrinsics, min_score: float

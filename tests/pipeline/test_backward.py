@@ -68,7 +68,8 @@ def test_each_window_is_the_tracker_run_backwards_from_the_windows_last_solution
         assert np.array_equal(both[last].bodies[0].pose, forward[last].bodies[0].pose)
         tracker.reset()
         start = forward[last].bodies[0].pose
-        tracker.previous, tracker.history, tracker.age = start.copy(), [start.copy()], SETTLED_AGE
+        tracker.previous, tracker.age = start.copy(), SETTLED_AGE
+        tracker.history.restart(start.copy())
         for k in range(last - 1, first - 1, -1):
             mine = tracker.step(seen[k], forward[k].bodies[0].detection)
             assert np.allclose(both[k].bodies[0].pose, mine.pose, atol=1e-9), k

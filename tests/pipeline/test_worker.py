@@ -131,6 +131,21 @@ def test_live_keeps_the_newest_frame_and_counts_the_dropped(wave_sequence, body)
     assert sink.statuses[-1]["opencl_device"]                 # the scorer's device is reported
 
 
+def test_live_reads_only_the_frames_it_tracks(wave_sequence, body, monkeypatch):
+    """Served at its rate, a folder's frames are decoded when detection takes them, not when they are
+    dropped on the way there: fewer depth images read than frames served, at least one per published."""
+    import swarmpose.sources.folder as folder
+
+    reads = []
+    real = folder.read_depth
+    monkeypatch.setattr(folder, "read_depth", lambda path, units: reads.append(path) or real(path, units))
+    sink = Collect()
+    stats = make_worker(wave_sequence, body, [sink], SMALL, drop_stale=True, pace_fps=200.0).run()
+    assert stats.dropped > 0 and stats.published <= len(reads) < stats.received
+    direct = next(iter(open_source(f"folder:{wave_sequence}")))
+    assert sink.frames[0]["frame"] == direct.index == 0
+
+
 class FlakyDetector:
     """The real detector, failing on chosen frames as a crashing network would."""
 
@@ -315,3 +330,27 @@ def test_a_detector_error_type_from_the_project_is_reported_the_same(wave_sequen
                 detector=Refusing(make_detector("simulated", source), set())).run()
     assert all("expected 3" in m["reason"] for m in sink.frames)
     assert all(m["bodies"][0]["state"] == "lost" for m in sink.frames)   # lift mode: no joints, no answer
+
+
+def test_serving_a_recording_without_a_rate_warns_and_assumes_30_fps(wave_sequence, tmp_path, caplog):
+    import json
+    import shutil
+    from contextlib import ExitStack
+
+    from swarmpose.pipeline.config import ServiceConfig, ZenohConfig
+    from swarmpose.pipeline.service import build_worker
+    from swarmpose.tracking.config import TrackerConfig
+
+    bare = tmp_path / "bare"
+    shutil.copytree(wave_sequence, bare)
+    meta = json.loads((bare / "sequence.json").read_text())
+    del meta["fps"]
+    (bare / "sequence.json").write_text(json.dumps(meta))
+    for folder, warned in ((wave_sequence, False), (bare, True)):
+        caplog.clear()
+        config = ServiceConfig(source=str(folder), detector="simulated", overlay=False,
+                               zenoh=ZenohConfig(zenoh_mode="off"), tracker=TrackerConfig(mode="lift", max_people=1))
+        with ExitStack() as stack:
+            worker, parts, _ = build_worker(config, stack, replay=False)
+            assert worker.pace_fps == 30.0 and parts.pipeline.frame_period_s == 1 / 30
+        assert ("records no frame rate" in caplog.text) == warned

@@ -225,7 +225,8 @@ def test_a_track_with_the_arm_hanging_finds_it_pointing_at_the_camera(body, prop
     truth, hanging, near, depth, detection = side_view(body, intr)
     tracker = BodyTracker(body, intr, TrackerConfig(particles=32, generations=32, recheck=0,
                                                     arm_proposals=proposals))
-    tracker.previous, tracker.history, tracker.age = hanging.copy(), [hanging.copy()], 10
+    tracker.previous, tracker.age = hanging.copy(), 10
+    tracker.history.restart(hanging.copy())
     result = tracker.step(Frame(1, 33_333_333, depth, None, intr), detection)
     names = (near[1], near[2])
     miss_m = np.linalg.norm(body.posed_points(result.found.pose[None], names)[0]

@@ -154,7 +154,8 @@ def test_a_track_with_the_arm_behind_the_body_finds_it_in_front_again(body, flip
 
     tracker = BodyTracker(lod, intr, TrackerConfig(particles=32, generations=32, recheck=0, limb_flips=flips,
                                                   arm_proposals=False))
-    tracker.previous, tracker.history, tracker.age = wrong.copy(), [wrong.copy()], 10
+    tracker.previous, tracker.age = wrong.copy(), 10
+    tracker.history.restart(wrong.copy())
     result = tracker.step(Frame(1, 33_333_333, depth, None, intr), detection)
     found = lod.posed_points(result.found.pose[None], names)[0]
     miss_m = np.linalg.norm(found - true_arm, axis=1).max()

@@ -190,11 +190,12 @@ def test_a_turned_solution_replaces_the_track_only_when_it_wins_twice():
     own[10] = 0.2  # another pose of the track's facing
     tracker.filter(front, 0.0)  # the smoothing has seen the old track
     mirrored_wins = PsoResult(back, 1.0, np.array([1.0]), 3, np.stack([back, own, back]), np.array([1.0, 2.0, 1.5]))
-    tracker.previous, tracker.history = front, [front]
+    tracker.previous = front
+    tracker.history.restart(front)
     np.testing.assert_array_equal(tracker._hold_facing(mirrored_wins), own)
-    assert tracker.challenger is back and tracker.history == [front]
+    assert tracker.challenger is back and tracker.history.poses == [front]
     np.testing.assert_array_equal(tracker._hold_facing(mirrored_wins), back)  # twice running: replaced
-    assert tracker.challenger is None and tracker.history == []
+    assert tracker.challenger is None and len(tracker.history) == 0
     np.testing.assert_allclose(tracker.filter(back, 1 / 30), back)  # the filter starts afresh: no blend
     tracker.challenger = back
     track_wins = PsoResult(own, 1.0, np.array([1.0]), 3, np.stack([own, back]), np.array([1.0, 1.5]))
@@ -233,10 +234,11 @@ def test_a_different_turned_solution_becomes_the_challenger_and_reset_forgets_it
     def winning(best: np.ndarray) -> PsoResult:
         return PsoResult(best, 1.0, np.array([1.0]), 2, np.stack([best, own]), np.array([1.0, 2.0]))
 
-    tracker.previous, tracker.history, tracker.age = front, [front], 7
+    tracker.previous, tracker.age = front, 7
+    tracker.history.restart(front)
     np.testing.assert_array_equal(tracker._hold_facing(winning(back)), own)
     np.testing.assert_array_equal(tracker._hold_facing(winning(lying)), own)  # not the same challenger
-    assert tracker.challenger is lying and tracker.history == [front]
+    assert tracker.challenger is lying and tracker.history.poses == [front]
     tracker.reset()
     assert tracker.challenger is None and tracker.age == 0 and tracker.previous is None
 

@@ -1,0 +1,53 @@
+"""A frame's search sized to a time budget: the live service's frames must keep up with the camera.
+
+Offline every frame gets the configured budget (``generations`` of the swarm, ``polish`` rounds).
+Live (``serve``), a frame that takes longer than the camera's frames makes the worker drop the ones
+that came meanwhile, and the next frame is further away. With a budget of B ms per frame, each
+frame's swarm runs as many generations, and the polish as many rounds, as the time that the rest of
+the frame leaves allows, up to the configured ones: 3/4 of it to the swarm and 1/4 to the polish
+(the configured budgets' share). The cost of a scored pose and the time outside the search are
+running means over the frames tracked so far (:class:`FrameBudget`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+SEARCH_SHARE = 0.75
+"""The swarm's share of the time left for the search (the rest: the polish)."""
+MIN_GENERATIONS = 6
+"""A frame's swarm runs at least this many generations, whatever the budget."""
+POLISH_CANDIDATES = 32
+"""Poses one polish round scores (:func:`swarmpose.tracking.pose_polish.polish_pose`)."""
+SMOOTHING = 0.3
+"""The new frame's weight in the running means."""
+
+
+@dataclass
+class FrameBudget:
+    """The running cost model of one tracker: ms per scored pose, ms per frame outside the search."""
+
+    ms_per_pose: float | None = None
+    other_ms: float | None = None
+
+    def plan(self, budget_ms: float, particles: int, generations: int, polish: int) -> tuple[int, int]:
+        """(generations, polish rounds) that fit ``budget_ms`` (0: the configured ones; the configured
+        ones also before the first frame is measured)."""
+        if budget_ms <= 0 or self.ms_per_pose is None or self.other_ms is None:
+            return generations, polish
+        left = max(budget_ms - self.other_ms, 0.0)
+        search = SEARCH_SHARE * left if polish else left
+        fitted_g = int(search / (particles * self.ms_per_pose)) - 1  # generation 0 scores the start
+        fitted_p = int((left - search) / (POLISH_CANDIDATES * self.ms_per_pose))
+        return max(min(fitted_g, generations), MIN_GENERATIONS), max(min(fitted_p, polish), 0)
+
+    def record(self, search_ms: float, poses: int, total_ms: float) -> None:
+        """Fold in one frame: ``search_ms`` for ``poses`` scored poses (swarm and polish), ``total_ms`` in all."""
+        if poses <= 0:
+            return
+        cost, other = search_ms / poses, max(total_ms - search_ms, 0.0)
+        if self.ms_per_pose is None or self.other_ms is None:
+            self.ms_per_pose, self.other_ms = cost, other
+        else:
+            self.ms_per_pose += SMOOTHING * (cost - self.ms_per_pose)
+            self.other_ms += SMOOTHING * (other - self.other_ms)

@@ -1,0 +1,39 @@
+"""Just-in-time detection: how long detection waits, against the running means worked out by hand."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from swarmpose.pipeline.schedule import SMOOTHING, JustInTime
+
+
+def test_no_wait_until_both_durations_are_known_and_the_tracker_is_busy():
+    timing = JustInTime()
+    assert timing.wait_s() == 0.0
+    timing.detected(0.02)
+    timing.tracking()
+    assert timing.wait_s() == 0.0  # no tracking time measured yet
+    timing.tracked()
+    assert timing.wait_s() == 0.0  # the tracker is idle: take the next frame now
+
+
+def test_detection_waits_for_the_tracker_less_its_own_time(monkeypatch):
+    now = [100.0]
+    monkeypatch.setattr(time, "monotonic", lambda: now[0])
+    timing = JustInTime()
+    timing.tracking()
+    now[0] += 0.10
+    timing.tracked()  # tracking takes 100 ms
+    timing.detected(0.03)
+    timing.tracking()
+    now[0] += 0.01
+    assert timing.wait_s() == pytest.approx(0.10 - 0.03 - 0.01)
+    now[0] += 0.09
+    timing.tracked()  # a 100 ms frame again
+    timing.detected(0.05)
+    assert timing.detect_s == pytest.approx(0.03 + SMOOTHING * (0.05 - 0.03))
+    timing.tracking()
+    now[0] += 0.5
+    assert timing.wait_s() == 0.0  # overdue: never negative

@@ -1,0 +1,27 @@
+"""The frame budget's sizing against hand computation."""
+
+from __future__ import annotations
+
+from swarmpose.tracking.budget import MIN_GENERATIONS, SMOOTHING, FrameBudget
+
+
+def test_no_budget_or_no_measurement_keeps_the_configured_search():
+    assert FrameBudget().plan(100.0, 64, 64, 60) == (64, 60)
+    assert FrameBudget(0.04, 20.0).plan(0.0, 64, 64, 60) == (64, 60)
+
+
+def test_the_time_left_is_shared_three_to_one_between_swarm_and_polish():
+    budget = FrameBudget(ms_per_pose=0.05, other_ms=20.0)  # 80 ms left: 60 for the swarm, 20 for the polish
+    assert budget.plan(100.0, 64, 64, 60) == (int(60 / (64 * 0.05)) - 1, int(20 / (32 * 0.05)))  # (17, 12)
+    assert budget.plan(100.0, 64, 10, 5) == (10, 5)  # never more than configured
+    assert budget.plan(10.0, 64, 64, 60) == (MIN_GENERATIONS, 0)  # nothing left: the least swarm
+    assert budget.plan(100.0, 64, 64, 0)[0] == int(80 / (64 * 0.05)) - 1  # no polish: all to the swarm
+
+
+def test_the_cost_model_is_a_running_mean():
+    budget = FrameBudget()
+    budget.record(search_ms=100.0, poses=2000, total_ms=150.0)
+    assert (budget.ms_per_pose, budget.other_ms) == (0.05, 50.0)
+    budget.record(search_ms=60.0, poses=2000, total_ms=80.0)
+    assert abs(budget.ms_per_pose - (0.05 + SMOOTHING * (0.03 - 0.05))) < 1e-12
+    assert abs(budget.other_ms - (50.0 + SMOOTHING * (20.0 - 50.0))) < 1e-12
