@@ -219,7 +219,7 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
                          help="serve a recording at its rate (looped) and report what a client sees: poses/s, "
                               "latency, start-up, live and client Δ")
     add_source_argument(p)
-    add_flags(p, ServiceConfig, (*TRACK_SETTINGS, "rate"))
+    add_flags(p, ServiceConfig, (*TRACK_SETTINGS, "rate", "frame_budget_ms"))
     p.add_argument("--seconds", type=non_negative_float, default=20.0,
                    help="how long to serve after the first pose")
     p.add_argument("--offline", action=argparse.BooleanOptionalAction, default=True,

@@ -69,6 +69,7 @@ from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError
 from swarmpose.detect.depth_surfaces import Coords, PeopleTuning, Piece, SurfaceFrame, supported_top
 from swarmpose.detect.floor import FloorPlane, check_depth, fit_floor
+from swarmpose.detect.peaks import find_peaks
 from swarmpose.detect.person_masks import attach_fragments, finish_mask
 
 BORDER_PX = 2
@@ -207,7 +208,6 @@ def _head_axes(frame: SurfaceFrame, p: Coords) -> list[tuple[float, float]]:
     """Step 4: heads (across, along) m of a piece, most prominent first, from the maxima of
     its head-height profile standing ``head_dip_m`` above the dips beside them."""
     from scipy.ndimage import maximum, uniform_filter1d
-    from scipy.signal import find_peaks
 
     c = frame.cfg
     start = float(p.across.min())
@@ -217,8 +217,7 @@ def _head_axes(frame: SurfaceFrame, p: Coords) -> list[tuple[float, float]]:
     profile[np.bincount(bins) == 0] = low
     padded = np.concatenate([[low], uniform_filter1d(profile, 3, mode="nearest"), [low]])
     distance = max(1, int(np.ceil(c.min_head_separation_m / c.profile_bin_m)))
-    peaks, props = find_peaks(padded, prominence=c.head_dip_m, distance=distance)
-    prominence = props["prominences"]
+    peaks, prominence = find_peaks(padded, c.head_dip_m, distance)
     if frame.floor is not None:  # a head top stands at a person's height
         plausible = (padded[peaks] >= c.min_top_m) & (padded[peaks] <= c.max_top_m)
         peaks, prominence = peaks[plausible], prominence[plausible]

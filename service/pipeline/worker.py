@@ -27,7 +27,7 @@ without joints; a tracker exception publishes the frame without bodies and resta
 track; a sink that fails is reported once and gets no more messages (the others go on; its
 failure is kept in ``sink_errors``); a live source that fails is
 reopened every ``reopen_s`` seconds; a recording that ends or fails ends the run (or starts
-over with ``loop``).
+over with ``loop``). A source opened again (looped or reopened) starts the tracks afresh.
 """
 
 from __future__ import annotations
@@ -60,6 +60,7 @@ class Received:
     received_ns: int
     detection: Detection | None = None
     detected_ns: int = 0
+    opening: int = 0  # which opening of the source (a loop or a reopen starts a new one) it came from
 
 
 class Worker:
@@ -97,6 +98,7 @@ class Worker:
         self._live_sinks = list(self.sinks)
         self._deferred_skips = 0
         self._timing = JustInTime()
+        self._opening = self._tracked_opening = 0
         self._stop = threading.Event()
         self._done = threading.Event()
         self._lock = threading.Lock()
@@ -209,7 +211,7 @@ class Worker:
                 source = self._reopen()
                 if source is None:
                     break
-                self.source = source
+                self.source, self._opening = source, self._opening + 1
                 self._set_state("running")
         finally:
             self._acquired.finish()
@@ -251,7 +253,7 @@ class Worker:
             received_ns = time.time_ns()
             if self.on_acquired is not None:
                 self.on_acquired(item, received_ns)
-            if not self._acquired.put(Received(item, received_ns)):
+            if not self._acquired.put(Received(item, received_ns, opening=self._opening)):
                 self.stats.update(dropped=1)
             if self._enough():
                 return
@@ -292,6 +294,9 @@ class Worker:
                     return
                 if not self.drop_stale:  # replay: leave out the wait for the previous frame's tracking
                     got.received_ns += time.time_ns() - got.detected_ns
+                if got.opening != self._tracked_opening:  # the recording started over (or the camera came back):
+                    self.pipeline.reset()                    # its people are new, where the old ones were is no help
+                    self._tracked_opening = got.opening
                 self._timing.tracking()
                 self._publish(got)
                 self._timing.tracked()

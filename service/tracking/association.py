@@ -55,17 +55,18 @@ def bhattacharyya(a: np.ndarray | None, b: np.ndarray | None) -> float:
 
 
 def pair_costs(expected: np.ndarray, observed: np.ndarray, track_looks: list[np.ndarray | None],
-               observed_looks: list[np.ndarray | None], appearance_m: float, gate_m: float) -> np.ndarray:
+               observed_looks: list[np.ndarray | None], appearance_m: float,
+               gate_m: float | np.ndarray) -> np.ndarray:
     """Cost matrix (T, O): distance (m) between ``expected`` (T, 3) and ``observed`` (O, 3)
     centres plus ``appearance_m`` × the looks' Bhattacharyya distance; :data:`NO_PAIR` beyond
-    ``gate_m`` or where a centre is not finite."""
+    ``gate_m`` (one for all, or (T,) one per track) or where a centre is not finite."""
     expected = np.asarray(expected, dtype=np.float64).reshape(-1, 3)
     observed = np.asarray(observed, dtype=np.float64).reshape(-1, 3)
     cost = np.linalg.norm(expected[:, None, :] - observed[None, :, :], axis=2)
     for t, look in enumerate(track_looks):
         for o, other in enumerate(observed_looks):
             cost[t, o] += appearance_m * bhattacharyya(look, other)
-    cost[~np.isfinite(cost) | (cost > gate_m)] = NO_PAIR
+    cost[~np.isfinite(cost) | (cost > np.reshape(gate_m, (-1, 1)))] = NO_PAIR
     return cost
 
 

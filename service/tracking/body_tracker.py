@@ -1,6 +1,4 @@
-"""The hybrid tracker of one body: per frame, PSO over the 36-D pose of the paper's
-objective (§2.3–2.4).
-
+"""The hybrid tracker of one body: per frame, PSO over the 36-D pose of the paper's objective (§2.3–2.4).
 Per frame (:meth:`BodyTracker.step`):
 
 1. The detection's joints (score >= ``min_score``) are lifted to J^e on the depth. With a
@@ -51,7 +49,7 @@ from swarmpose.sources.base import Frame
 from swarmpose.tracking import search, verdict
 from swarmpose.tracking.arm_proposals import arm_proposals
 from swarmpose.tracking.body_scene import body_scene
-from swarmpose.tracking.budget import POLISH_CANDIDATES, FrameBudget
+from swarmpose.tracking.budget import POLISH_CANDIDATES, FrameBudget, lean_frame, start_budget
 from swarmpose.tracking.config import MODE_WEIGHTS, TrackerConfig
 from swarmpose.tracking.hidden_lifts import without_hidden_lifts
 from swarmpose.tracking.history import TrackHistory
@@ -231,7 +229,8 @@ class BodyTracker:
         else:
             centre = self.previous
             hidden = self.config.hidden_lifts and self.config.mode != "depth"  # depth mode: no joint term
-            arms = self.config.arm_proposals and self.config.mode != "joints"  # proposals the depth judges
+            lean = lean_frame(self.budget_ms, pso.generations)  # live, a starved search: no proposals
+            arms = self.config.arm_proposals and self.config.mode != "joints" and not lean  # the depth judges them
             with timed(timings, "scene"):
                 scene = body_scene(self.body, centre) if hidden or arms else None  # one posed body for both
             if hidden:
@@ -252,7 +251,7 @@ class BodyTracker:
                 with timed(timings, "arms"):
                     proposals += arm_proposals(self.body, centre, depth, self.intrinsics, box, scene)[:room]
                 room = pso.particles - len(seeds) - len(proposals)
-            if self.config.limb_flips and room > 0:
+            if self.config.limb_flips and room > 0 and not lean:
                 with timed(timings, "flips"):
                     proposals += limb_flips(self.body, centre, most=room)
         for i, s in enumerate((seeds + proposals)[:pso.particles]):
@@ -359,11 +358,12 @@ class BodyTracker:
                            else Objective(self.body, self.intrinsics, self.objective.scorer, weights,
                                           self.objective.coarse))
         start_objective.set_frame(depth, box, targets, centre)
-        # the start runs once per track, so it gets at least config.start_budget: at p = g = 32 a
-        # side view's start did not converge (151 deg off, 215 mm; BENCHMARKS.md, issue 12)
+        # the start runs once per track, so it gets at least config.start_budget (at p = g = 32 a side view's
+        # start did not converge: 151 deg off, 215 mm; BENCHMARKS.md, issue 12); live, a start that keeps up
         first = generations is None
-        budget = max(self.config.generations, self.config.start_budget) if first else generations
-        particles = max(self.config.particles, self.config.start_budget) if first else self.config.particles
+        least = start_budget(self.config.start_budget, self.budget_ms)
+        budget = max(self.config.generations, least) if first else generations
+        particles = max(self.config.particles, least) if first else self.config.particles
         # joints only (no depth): the joint stage is the whole fit, at twice the generations
         pso = replace(self.config.pso_config, variant="perturbed",
                       generations=budget * (1 if joint_objective is not None else 2), particles=particles)

@@ -6,7 +6,8 @@ that came meanwhile, and the next frame is further away. With a budget of B ms p
 frame's swarm runs as many generations, and the polish as many rounds, as the time that the rest of
 the frame leaves allows, up to the configured ones: 3/4 of it to the swarm and 1/4 to the polish
 (the configured budgets' share). The cost of a scored pose and the time outside the search are
-running means over the frames tracked so far (:class:`FrameBudget`).
+running means over the frames tracked so far (:class:`FrameBudget`). A starved search skips the
+proposals (:func:`lean_frame`), and a track's start is smaller (:func:`start_budget`).
 """
 
 from __future__ import annotations
@@ -21,6 +22,13 @@ POLISH_CANDIDATES = 32
 """Poses one polish round scores (:func:`swarmpose.tracking.pose_polish.polish_pose`)."""
 SMOOTHING = 0.3
 """The new frame's weight in the running means."""
+LEAN_BELOW = 16
+"""With a budget, a frame whose swarm gets fewer generations than this skips the limb flips and arm
+proposals (and their sub-swarms): their host work (about 60 ms a frame on 2 cores) then costs the
+search more than they give, and a sub-swarm needs generations to refine its hypothesis."""
+START_SHARE = 0.5
+"""With a budget, a track's start runs this share of ``start_budget`` particles and generations each
+(a quarter of the scored poses): a lost track's restart holds up every frame behind it."""
 
 
 @dataclass
@@ -51,3 +59,14 @@ class FrameBudget:
         else:
             self.ms_per_pose += SMOOTHING * (cost - self.ms_per_pose)
             self.other_ms += SMOOTHING * (other - self.other_ms)
+
+
+def lean_frame(budget_ms: float, generations: int) -> bool:
+    """Whether a frame with ``generations`` planned under ``budget_ms`` (0: none) skips the proposals."""
+    return budget_ms > 0 and generations < LEAN_BELOW
+
+
+def start_budget(configured: int, budget_ms: float) -> int:
+    """The least particles and generations of a track's start: ``configured``, or with a budget its
+    :data:`START_SHARE`."""
+    return max(int(configured * START_SHARE), 1) if budget_ms > 0 else configured

@@ -50,6 +50,9 @@ log = logging.getLogger(__name__)
 
 GATE_M = 0.8
 """A track and a segment farther apart than this (m, plus the appearance term) never pair."""
+DROPPED_GATE_M = 0.05
+"""The gate widens by this (m) for every frame dropped since the last one tracked (live): a person
+walking at 1.5 m/s moves that far from one frame of a 30 fps camera to the next."""
 APPEARANCE_M = 0.5
 """Metres of centre distance that completely different colours weigh."""
 VELOCITY_BLEND = 0.5
@@ -131,6 +134,7 @@ class PeopleTracker:
         self._next_id = int(first_id)
         self._spare: list[BodyTracker] = []  # trackers of retired or refused tracks, reused (no new scorer)
         self.budget_ms = 0.0  # each person's share of a frame's time (ms, live); 0: the configured search
+        self._last_index: int | None = None  # the frame tracked before this one
 
     @property
     def device_name(self) -> str:
@@ -181,6 +185,7 @@ class PeopleTracker:
         looks = [colour_histogram(frame.color, p.segment.mask) if p.segment is not None else None for p in people]
         results: dict[int, BodyResult] = {}
         assignment = self._associate(frame.index, people, centres, looks)
+        self._last_index = frame.index
         for t, o in assignment.pairs:
             track = self.tracks[t]
             body = self._fit(track.tracker, frame, self._frame_for(frame, labels, o, people[o]), people[o].joints)
@@ -270,8 +275,9 @@ class PeopleTracker:
             cost[int(np.argmax([t.last_frame for t in self.tracks])), 0] = 0.0
             return assign(cost)
         expected = np.stack([t.expected(index) for t in self.tracks])
+        dropped = 0 if self._last_index is None else max(index - self._last_index - 1, 0)
         return assign(pair_costs(expected, np.stack(centres), [t.look for t in self.tracks], looks,
-                                 APPEARANCE_M, GATE_M))
+                                 APPEARANCE_M, GATE_M + DROPPED_GATE_M * dropped))
 
     @staticmethod
     def _centre(person: PersonDetection) -> np.ndarray:

@@ -52,11 +52,11 @@ def test_a_published_frame_without_the_person_is_a_miss_not_an_error():
 
 
 @pytest.mark.slow
-def test_a_short_live_run_publishes_poses_near_the_truth(wave_sequence):
+def test_a_short_live_run_publishes_poses_near_the_truth(side_wave):
     from swarmpose.pipeline.config import ServiceConfig
     from swarmpose.tracking.config import TrackerConfig
 
-    config = ServiceConfig(source=str(wave_sequence), detector="simulated", overlay=False,
+    config = ServiceConfig(source=str(side_wave), detector="simulated", overlay=False, rate=10.0,  # 2 s a pass
                            tracker=TrackerConfig(particles=16, generations=8, polish=4, max_people=1))
     result = bench_live(config, seconds=2.0, offline=True, startup=False)
     assert result["poses"] >= 3 and result["poses_per_s"] > 0
@@ -64,3 +64,13 @@ def test_a_short_live_run_publishes_poses_near_the_truth(wave_sequence):
     assert result["latency_ms"]["p95"] >= result["latency_ms"]["median"] > 0
     assert result["live_mm"] < 150 and result["offline_mm"] < 150
     assert result["client_floor_mm"] is not None and result["stage_ms"]["search"] > 0
+
+
+def test_camera_frames_of_a_new_pass_before_its_first_pose_are_left_out_of_the_client_figures():
+    truth = _truth(4)
+    log = LiveLog()
+    log.acquired = [(0, 0, 0), (0, 1, int(1e8)), (1, 0, int(2e8)), (1, 1, int(3e8))]  # looped after frame 1
+    log.published = [_published(0, 0.0, 0.05, truth)]  # the new pass has no pose yet
+    figures = accuracy_figures(log, truth)
+    assert figures["client_frames_left_out"] == 2
+    assert figures["client_mm"] == pytest.approx(90.0)  # frame 1 only: frame 0's pose, 0.09 m behind

@@ -354,3 +354,13 @@ def test_serving_a_recording_without_a_rate_warns_and_assumes_30_fps(wave_sequen
             worker, parts, _ = build_worker(config, stack, replay=False)
             assert worker.pace_fps == 30.0 and parts.pipeline.frame_period_s == 1 / 30
         assert ("records no frame rate" in caplog.text) == warned
+
+
+def test_a_looped_recording_starts_its_tracks_afresh(wave_sequence, body):
+    """Each pass over a looped recording is a new take: its first frame starts a new track (state
+    init), not a continuation of the last frame's, where the person was somewhere else."""
+    sink = Collect()
+    make_worker(wave_sequence, body, [sink], SMALL, loop=True, frames=12).run()
+    states = [(m["frame"], m["bodies"][0]["state"]) for m in sink.frames]
+    assert [s for f, s in states if f == 0] == ["init", "init"]
+    assert all(s == "tracking" for f, s in states if f != 0)

@@ -89,3 +89,20 @@ def test_a_body_following_a_hidden_person_is_no_false_positive():
     assert r["matched"] == {2: {0: 6}}
     assert score_people({0: [TruePerson(1, joints, visible=0.0)]}, {})["mota"] is None  # nobody to find
 
+
+
+def test_the_gate_widens_with_the_frames_dropped_since_the_last_tracked_one():
+    """Live, frames dropped between two tracked ones let a person move further: 1 m away after the
+    next frame is another person, 1 m away 20 dropped frames later (0.8 + 20 x 0.05 m) the same one."""
+    from types import SimpleNamespace
+
+    from swarmpose.tracking.people_tracker import DROPPED_GATE_M, GATE_M, PeopleTracker, Track
+
+    people = [SimpleNamespace(segment=object())]
+    moved = [np.array([1.0, 0.0, 3.0])]
+    for dropped, paired in ((0, False), (20, True)):
+        tracker = PeopleTracker(lambda body_id: None)
+        tracker.tracks = [Track(0, None, np.array([0.0, 0.0, 3.0]), last_frame=10)]
+        tracker._last_index = 10
+        result = tracker._associate(11 + dropped, people, moved, [None])
+        assert (result.pairs == ((0, 0),)) == paired, (dropped, GATE_M + DROPPED_GATE_M * dropped)

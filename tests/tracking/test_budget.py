@@ -25,3 +25,10 @@ def test_the_cost_model_is_a_running_mean():
     budget.record(search_ms=60.0, poses=2000, total_ms=80.0)
     assert abs(budget.ms_per_pose - (0.05 + SMOOTHING * (0.03 - 0.05))) < 1e-12
     assert abs(budget.other_ms - (50.0 + SMOOTHING * (20.0 - 50.0))) < 1e-12
+
+
+def test_lean_frames_and_the_start_only_with_a_budget():
+    from swarmpose.tracking.budget import LEAN_BELOW, START_SHARE, lean_frame, start_budget
+
+    assert not lean_frame(0.0, 6) and lean_frame(100.0, LEAN_BELOW - 1) and not lean_frame(100.0, LEAN_BELOW)
+    assert start_budget(64, 0.0) == 64 and start_budget(64, 100.0) == int(64 * START_SHARE)
