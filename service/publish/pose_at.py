@@ -16,8 +16,9 @@ import numpy as np
 
 from swarmpose.body.skeleton import EVAL_JOINTS
 
-HORIZON_S = 0.3
-"""The longest time a pose is moved on (s); later moments get the pose of that one."""
+HORIZON_S = 0.1
+"""The longest time a pose is moved on (s); later moments get the pose of that one: the velocities of
+poses tracked a few times a second are rough, and a longer line leads away from the person."""
 
 
 def extrapolate(joints: np.ndarray, velocities: np.ndarray, dt_s: float) -> np.ndarray:
