@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from swarmpose.bench.live import LiveLog, Published, accuracy_figures, bench_live, stage_split
+from swarmpose.publish.pose_at import HORIZON_S
 from swarmpose.sources.groundtruth import GroundTruth
 
 J = 14
@@ -35,8 +36,10 @@ def test_live_client_floor_and_extrapolated_deltas_are_those_worked_out_by_hand(
     # frames 1, 2, 3 see frame 0's pose (x = 0.01), frames 4, 5 frame 3's (x = 0.31); frame 0 sees none yet
     assert figures["client_mm"] == pytest.approx((90 + 190 + 290 + 90 + 190) / 5)
     assert figures["client_floor_mm"] == pytest.approx((100 + 200 + 300 + 100 + 200) / 5)
-    # moved on at 1 m/s each pose is 10 mm off again (frame 3 from frame 0: 0.3 s, the horizon)
-    assert figures["client_extrapolated_mm"] == pytest.approx(10.0)
+    # moved on at 1 m/s for at most HORIZON_S: frame k sees the pose of frame j moved by min(dt, HORIZON_S)
+    seen = [(0.01, 0.1, 0.1), (0.01, 0.2, 0.2), (0.01, 0.3, 0.3), (0.31, 0.4, 0.1), (0.31, 0.5, 0.2)]  # x, truth, dt
+    expected = [1000 * abs(x + min(dt, HORIZON_S) - truth) for x, truth, dt in seen]
+    assert figures["client_extrapolated_mm"] == pytest.approx(sum(expected) / len(expected))
     assert figures["missed"] == 0
     split = stage_split(log)
     assert split["search"] == 30.0 and split["polish"] == 5.0 and split["publish"] == 1.5 and split["total"] == 40.0
