@@ -223,11 +223,15 @@ def serve_startup_s(config: ServiceConfig, cache: Path, timeout_s: float = START
     written pose, with ``cache`` as its cache folder (kernels, bodies); None when none came."""
     with tempfile.TemporaryDirectory(prefix="swarmpose-bench-live-") as tmp:
         record = Path(tmp) / "record"
+        t = config.tracker
         argv = [sys.executable, "-m", "swarmpose", "serve", config.source, "--zenoh-mode", "off", "--record",
-                str(record), "--no-overlay", "--body", config.body, "--detector", config.detector, "--quiet"]
-        if config.shape:
-            argv += ["--shape", config.shape]
-        env = {**os.environ, "XDG_CACHE_HOME": str(cache), "POCL_CACHE_DIR": str(cache / "pocl")}
+                str(record), "--no-overlay", "--body", config.body, "--detector", config.detector, "--quiet",
+                "--particles", str(t.particles), "--generations", str(t.generations), "--max-people",
+                str(t.max_people), "--frame-budget-ms", str(config.frame_budget_ms), "--rate", str(config.rate)]
+        argv += ["--shape", config.shape] if config.shape else []
+        argv += ["--models", config.models] if config.models else []
+        env = {**os.environ, "XDG_CACHE_HOME": str(cache), "POCL_CACHE_DIR": str(cache / "pocl"),
+               "SWARMPOSE_CACHE_DIR": str(cache / "swarmpose")}
         started = time.monotonic()
         proc = subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         poses = record / "poses.jsonl"

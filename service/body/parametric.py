@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import asdict, dataclass
+from importlib.metadata import version
 from pathlib import Path
 
 import numpy as np
@@ -208,9 +209,12 @@ _DEFAULT_SHAPE = BodyShape()
 _ARRAYS = ("vertices", "triangles", "skin_indices", "skin_weights", "bone_parents", "bone_heads", "bind_matrices",
            "bone_joint", "bone_fraction", "point_bones", "point_rest")
 """The fields of a built-in body kept in the user's cache (the rest follow from the shape)."""
-_BUILT_FROM = tuple(Path(__file__).parent / name for name in
-                    ("parametric.py", "parametric_sdf.py", "parametric_shape.py", "landmarks.py", "skinned.py"))
+_BUILT_FROM = tuple(Path(__file__).parent / name for name in ("parametric.py", "parametric_sdf.py",
+                                                             "parametric_shape.py", "landmarks.py", "skinned.py",
+                                                             "skeleton.py"))
 """The code a cached body depends on: a change to any of it builds the body again."""
+_BUILT_WITH = ("numpy", "scipy", "scikit-image", "open3d")
+"""The libraries meshing and decimating it: another version of any builds the body again."""
 
 
 @functools.lru_cache(maxsize=16)
@@ -225,13 +229,9 @@ def build_parametric_body(shape: BodyShape = _DEFAULT_SHAPE, resolution: float =
     """
     if not 0.003 <= float(resolution) <= 0.03:
         raise ConfigError(f"body mesh resolution {resolution} m is outside the allowed range 0.003..0.03 m")
-    key = cache_key(asdict(shape), float(resolution), sources=_BUILT_FROM)
+    key = cache_key(asdict(shape), float(resolution), [version(name) for name in _BUILT_WITH], sources=_BUILT_FROM)
 
-    def build() -> dict[str, np.ndarray]:
-        body = _mesh_body(shape, float(resolution))
-        return {name: getattr(body, name) for name in _ARRAYS}
-
-    arrays = cached_arrays("bodies", key, build)
+    arrays = cached_arrays("bodies", key, lambda: _mesh_arrays(shape, float(resolution)))
     preset = preset_name(shape)
     return SkinnedBody(name="builtin" if preset in (None, "default") else f"builtin:{preset}",
                        bone_names=BONE_NAMES, point_names=POINT_NAMES,
@@ -239,8 +239,9 @@ def build_parametric_body(shape: BodyShape = _DEFAULT_SHAPE, resolution: float =
                        **{name: np.array(arrays[name]) for name in _ARRAYS})
 
 
-def _mesh_body(shape: BodyShape, resolution: float) -> SkinnedBody:
-    """The built-in body of ``shape`` meshed anew (see :func:`build_parametric_body`)."""
+def _mesh_arrays(shape: BodyShape, resolution: float) -> dict[str, np.ndarray]:
+    """The arrays (:data:`_ARRAYS`) of the built-in body of ``shape`` meshed anew (see
+    :func:`build_parametric_body`)."""
     layout = _layout(shape)
     values, origin = sample_field(layout.parts, BLEND * layout.scale, float(resolution))
     verts, faces = mesh_field(values, origin, float(resolution), TARGET_TRIANGLES)
@@ -269,16 +270,8 @@ def _mesh_body(shape: BodyShape, resolution: float) -> SkinnedBody:
 
     parents = np.array([BONE_INDEX[p] if p else -1 for _, p, _, _ in BONES], dtype=np.int64)
     bone_joint = np.array([JOINT_INDEX[jn] if jn else -1 for _, _, jn, _ in BONES], dtype=np.int64)
-    preset = preset_name(shape)
-    body = SkinnedBody(
-        name="builtin" if preset in (None, "default") else f"builtin:{preset}",
-        vertices=verts, triangles=faces, skin_indices=skin_indices, skin_weights=skin_weights,
-        bone_names=BONE_NAMES, bone_parents=parents, bone_heads=heads,
-        bind_matrices=body_frame_bind_matrices(heads), bone_joint=bone_joint,
-        bone_fraction=np.array([f for *_, f in BONES], dtype=np.float64),
-        point_names=POINT_NAMES,
-        point_bones=np.array([BONE_INDEX[carriers[p]] for p in POINT_NAMES], dtype=np.int64),
-        point_rest=np.stack([exact[p] for p in POINT_NAMES]).astype(np.float64),
-        metadata={"source": "builtin", "shape": asdict(shape), "resolution": float(resolution)},
-    )
-    return body
+    return {"vertices": verts, "triangles": faces, "skin_indices": skin_indices, "skin_weights": skin_weights,
+            "bone_parents": parents, "bone_heads": heads, "bind_matrices": body_frame_bind_matrices(heads),
+            "bone_joint": bone_joint, "bone_fraction": np.array([f for *_, f in BONES], dtype=np.float64),
+            "point_bones": np.array([BONE_INDEX[carriers[p]] for p in POINT_NAMES], dtype=np.int64),
+            "point_rest": np.stack([exact[p] for p in POINT_NAMES]).astype(np.float64)}

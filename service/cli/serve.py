@@ -31,8 +31,9 @@ if TYPE_CHECKING:  # the worker and the protocol are imported by the commands th
     from swarmpose.pipeline.worker import Worker
 
 REPLAY_DEFAULTS = {"zenoh_mode": "off"}
-REPLAY_SETTINGS = tuple(name for name in leaves(ServiceConfig) if name not in ("loop", "record"))
-"""The settings ``replay`` takes: it writes into ``--out`` and ends with the recording."""
+REPLAY_SETTINGS = tuple(name for name in leaves(ServiceConfig) if name not in ("loop", "record", "frame_budget_ms"))
+"""The settings ``replay`` takes: it writes into ``--out``, ends with the recording and tracks every frame
+with the full search."""
 def cmd_serve(args: argparse.Namespace) -> int:
     """Run the worker and publish over zenoh until the source ends or a signal comes."""
     from swarmpose.messages.schema import keys

@@ -12,8 +12,7 @@ from __future__ import annotations
 import threading
 import time
 
-SMOOTHING = 0.3
-"""The newest duration's weight in the running means."""
+from swarmpose.tracking.budget import running_mean
 
 
 class JustInTime:
@@ -24,27 +23,35 @@ class JustInTime:
         self.track_s: float | None = None
         self.detect_s: float | None = None
         self._tracking_since: float | None = None
-
-    @staticmethod
-    def _mean(old: float | None, new: float) -> float:
-        return new if old is None else old + SMOOTHING * (new - old)
+        self.idle = threading.Event()
+        """Set while the tracker is between frames (a waiting detection wakes when it finishes early)."""
+        self.idle.set()
 
     def tracking(self) -> None:
         """The tracker started a frame."""
         with self._lock:
             self._tracking_since = time.monotonic()
+            self.idle.clear()
 
     def tracked(self) -> None:
         """The tracker finished its frame."""
         with self._lock:
             if self._tracking_since is not None:
-                self.track_s = self._mean(self.track_s, time.monotonic() - self._tracking_since)
+                self.track_s = running_mean(self.track_s, time.monotonic() - self._tracking_since)
             self._tracking_since = None
+            self.idle.set()
 
     def detected(self, seconds: float) -> None:
         """A detection took ``seconds``."""
         with self._lock:
-            self.detect_s = self._mean(self.detect_s, seconds)
+            self.detect_s = running_mean(self.detect_s, seconds)
+
+    def wait(self) -> None:
+        """Wait until detection should take the next frame: :meth:`wait_s`, or less when the tracker
+        finishes its frame first."""
+        seconds = self.wait_s()
+        if seconds > 0:
+            self.idle.wait(seconds)
 
     def wait_s(self) -> float:
         """How long detection should wait before it takes the next frame (0: take it now)."""

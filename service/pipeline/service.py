@@ -232,11 +232,11 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
     else:
         pace = None if parts.source.live else (config.rate or parts.fps)
         if pace and not config.rate and not (parts.source.rate_known and getattr(parts.source, "fps", 0)):
-            log.warning("%s records no frame rate (a sequence folder's sequence.json \"fps\"); serving it at "
-                        "%g frames/s, its frames stamped so; pass --rate to serve it at another", config.source,
+            log.warning("%s records no frame rate (a sequence folder keeps it in sequence.json's \"fps\"); serving "
+                        "it at %g frames/s, its frames stamped so; pass --rate to serve it at another", config.source,
                         parts.fps)
-        for pipeline in getattr(parts.pipeline, "members", [parts.pipeline]):  # live: keep up with the camera
-            pipeline.frame_period_s, pipeline.budget_ms = 1.0 / parts.fps, config.frame_budget_ms
+        parts.pipeline.frame_period_s = 1.0 / parts.fps  # live: keep up with the camera
+        parts.pipeline.budget_ms = config.frame_budget_ms
     uri = config.source
     worker = Worker(lambda: open_source(uri), parts.pipeline, sinks, camera=config.camera_id, drop_stale=not replay,
                     pace_fps=pace, loop=config.loop and not replay, frames=config.frames,

@@ -273,6 +273,7 @@ class FramePipeline:
                 self.intrinsics = intrinsics
             labels = None if detection.segmentation is None else detection.segmentation.labels
             self.people.budget_ms = self.budget_ms / max(len(detection.people), 1)
+            self.people.live = self.frame_period_s is not None
             bodies = self.people.step(frame, detection.people, labels)
         except Exception as exc:  # a frame that fails to track (not one person's fit): every track restarts
             if self.people is not None:
@@ -305,7 +306,7 @@ class FramePipeline:
             self._box, self._boxes = None, []
         reason = "; ".join(r for r in (detection.note, f"tracking failed: {describe_error(exc)}") if r)
         return FrameResult(frame.index, frame.timestamp_ns, (), reason,
-                           {"detect": detection.ms, "total": detection.ms + 1000 * (time.perf_counter() - t0)},
+                           {**detection.timings_ms, "total": detection.ms + 1000 * (time.perf_counter() - t0)},
                            received_ns=received_ns)
 
     def process(self, item: Frame | SkippedFrame) -> FrameResult:

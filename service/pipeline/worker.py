@@ -126,6 +126,7 @@ class Worker:
         :meth:`_set_state` looks at the Event again after writing, so "stopping" stays."""
         self._stop.set()
         self.state = "stopping"
+        self._timing.idle.set()  # a detection waiting for the tracker goes on to see the stop
         self._acquired.abort()
         self._detected.abort()
 
@@ -261,9 +262,12 @@ class Worker:
     def _detect(self) -> None:
         try:
             while True:
-                if self.drop_stale and self._stop.wait(self._timing.wait_s()):  # live: just in time for tracking
-                    return
+                if self.drop_stale:  # live: just in time for the tracker
+                    self._timing.wait()
+                    if self._stop.is_set():
+                        return
                 got = self._acquired.get()
+                started = time.monotonic()
                 if got is END:
                     return
                 if not self.drop_stale:
@@ -274,7 +278,6 @@ class Worker:
                         self._deferred_skips += 1
                         warn_skipped(self.source_uri, got.item, self._deferred_skips)
                 if isinstance(got.item, Frame):
-                    started = time.monotonic()
                     got.detection = self.pipeline.detect(got.item)
                     self._timing.detected(time.monotonic() - started)
                     if got.detection.note:

@@ -1,4 +1,5 @@
 """The hybrid tracker of one body: per frame, PSO over the 36-D pose of the paper's objective (§2.3–2.4).
+
 Per frame (:meth:`BodyTracker.step`):
 
 1. The detection's joints (score >= ``min_score``) are lifted to J^e on the depth. With a
@@ -213,12 +214,8 @@ class BodyTracker:
 
         rng = np.random.default_rng([self.config.seed, frame.index])
         pso = self.config.pso_config
-        if state == "tracking":  # live: the swarm and the polish sized to the frame's time
-            generations, self.polish_rounds = self.costs.plan(self.budget_ms, pso.particles, pso.generations,
-                                                              self.config.polish)
-            pso = replace(pso, generations=generations)
-        else:
-            self.polish_rounds = self.config.polish
+        budget = self.budget_ms if state == "tracking" else 0.0  # live: the swarm and polish sized to the frame
+        pso, self.polish_rounds = self.costs.sized(budget, pso, self.config.polish)
         timings: dict[str, float] = {}
         proposals: list[np.ndarray] = []  # limb flips and arm proposals (tracking only)
         if state == "init":
@@ -267,9 +264,10 @@ class BodyTracker:
         result = self._search(self.objective, start, rng, pso, groups)
         timings["pso"] = 1000 * (time.perf_counter() - t1) - timings.get("hypotheses", 0.0)
         timings.update(search_split(self.objective.take_spent(), timings["pso"]))
-        with timed(timings, "polish"):  # polish 0: as it is; a young track: a duel
-            best = polish_solution(self.objective, result, self.previous, self.polish_rounds, rng,
-                                   self.age < max(YOUNG_RECHECKS), self._hold_facing, REPLACED_TURN_DEG)
+        duel = self.age < max(YOUNG_RECHECKS) and self.previous is not None  # a young track: both facings polished
+        with timed(timings, "polish"):  # polish 0: as it is
+            best = polish_solution(self.objective, result, self.previous, self.polish_rounds, rng, duel,
+                                   self._hold_facing, REPLACED_TURN_DEG)
         t_verdict = time.perf_counter()
         self.objective(best[None])
         parts = {k: float(v[0]) for k, v in self.objective.last_parts.items()}
@@ -289,8 +287,8 @@ class BodyTracker:
         timings["verdict"] = 1000 * (time.perf_counter() - t_verdict)
         timings["total"] = 1000 * (time.perf_counter() - t0)
         if state == "tracking":
-            self.costs.record(timings["pso"] + timings["polish"],
-                              result.evaluations + POLISH_CANDIDATES * self.polish_rounds, timings["total"])
+            polished = POLISH_CANDIDATES * self.polish_rounds * (1 + duel)
+            self.costs.record(timings["pso"] + timings["polish"], result.evaluations + polished, timings["total"])
         result = BodyResult(self.body_id, out_state, reason, best, joints3d, joints2d, conf, parts, timings, joints)
         if self.filter is None or out_state == "lost":
             return result

@@ -12,7 +12,9 @@ proposals (:func:`lean_frame`), and a track's start is smaller (:func:`start_bud
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+
+from swarmpose.tracking.pso import PsoConfig
 
 SEARCH_SHARE = 0.75
 """The swarm's share of the time left for the search (the rest: the polish)."""
@@ -39,26 +41,33 @@ class FrameBudget:
     other_ms: float | None = None
 
     def plan(self, budget_ms: float, particles: int, generations: int, polish: int) -> tuple[int, int]:
-        """(generations, polish rounds) that fit ``budget_ms`` (0: the configured ones; the configured
-        ones also before the first frame is measured)."""
+        """(generations, polish rounds) that fit ``budget_ms``, never more than configured and at least
+        :data:`MIN_GENERATIONS` generations where that many are configured (0: the configured ones; the
+        configured ones also before the first frame is measured)."""
         if budget_ms <= 0 or self.ms_per_pose is None or self.other_ms is None:
             return generations, polish
         left = max(budget_ms - self.other_ms, 0.0)
         search = SEARCH_SHARE * left if polish else left
         fitted_g = int(search / (particles * self.ms_per_pose)) - 1  # generation 0 scores the start
         fitted_p = int((left - search) / (POLISH_CANDIDATES * self.ms_per_pose))
-        return max(min(fitted_g, generations), MIN_GENERATIONS), max(min(fitted_p, polish), 0)
+        return min(max(fitted_g, MIN_GENERATIONS), generations), max(min(fitted_p, polish), 0)
+
+    def sized(self, budget_ms: float, pso: PsoConfig, polish: int) -> tuple[PsoConfig, int]:
+        """``pso`` with the generations and the polish rounds of :meth:`plan`."""
+        generations, rounds = self.plan(budget_ms, pso.particles, pso.generations, polish)
+        return replace(pso, generations=generations), rounds
 
     def record(self, search_ms: float, poses: int, total_ms: float) -> None:
         """Fold in one frame: ``search_ms`` for ``poses`` scored poses (swarm and polish), ``total_ms`` in all."""
         if poses <= 0:
             return
         cost, other = search_ms / poses, max(total_ms - search_ms, 0.0)
-        if self.ms_per_pose is None or self.other_ms is None:
-            self.ms_per_pose, self.other_ms = cost, other
-        else:
-            self.ms_per_pose += SMOOTHING * (cost - self.ms_per_pose)
-            self.other_ms += SMOOTHING * (other - self.other_ms)
+        self.ms_per_pose, self.other_ms = running_mean(self.ms_per_pose, cost), running_mean(self.other_ms, other)
+
+
+def running_mean(old: float | None, new: float, weight: float = SMOOTHING) -> float:
+    """``new`` folded into the running mean ``old`` with ``weight`` (``new`` itself when there is none)."""
+    return new if old is None else old + weight * (new - old)
 
 
 def lean_frame(budget_ms: float, generations: int) -> bool:

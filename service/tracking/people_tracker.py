@@ -51,8 +51,9 @@ log = logging.getLogger(__name__)
 GATE_M = 0.8
 """A track and a segment farther apart than this (m, plus the appearance term) never pair."""
 DROPPED_GATE_M = 0.05
-"""The gate widens by this (m) for every frame dropped since the last one tracked (live): a person
-walking at 1.5 m/s moves that far from one frame of a 30 fps camera to the next."""
+"""Live (``PeopleTracker.live``), the gate widens by this (m) for every frame dropped since the last one
+tracked: a person walking at 1.5 m/s moves that far from one frame of a 30 fps camera to the next.
+(Offline no frame is dropped; a frame the source could not deliver leaves the gate as it is.)"""
 APPEARANCE_M = 0.5
 """Metres of centre distance that completely different colours weigh."""
 VELOCITY_BLEND = 0.5
@@ -135,6 +136,7 @@ class PeopleTracker:
         self._spare: list[BodyTracker] = []  # trackers of retired or refused tracks, reused (no new scorer)
         self.budget_ms = 0.0  # each person's share of a frame's time (ms, live); 0: the configured search
         self._last_index: int | None = None  # the frame tracked before this one
+        self.live = False  # frames may be dropped between two tracked ones (serve): the gate widens for them
 
     @property
     def device_name(self) -> str:
@@ -275,7 +277,7 @@ class PeopleTracker:
             cost[int(np.argmax([t.last_frame for t in self.tracks])), 0] = 0.0
             return assign(cost)
         expected = np.stack([t.expected(index) for t in self.tracks])
-        dropped = 0 if self._last_index is None else max(index - self._last_index - 1, 0)
+        dropped = 0 if self._last_index is None or not self.live else max(index - self._last_index - 1, 0)
         return assign(pair_costs(expected, np.stack(centres), [t.look for t in self.tracks], looks,
                                  APPEARANCE_M, GATE_M + DROPPED_GATE_M * dropped))
 

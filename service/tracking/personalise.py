@@ -3,8 +3,9 @@
 Input: samples of one person (a frame, its detection and the pose the tracker found with the
 shape space's start body). :func:`fit_shape` chooses ``keyframes`` well-spread frames, then:
 
-0. **Sweep.** A coarse grid (:data:`SWEEP`: gender × height) of shapes, each with its own pose
-   step, picks the start: poses tracked with the start body favour shapes like it. Its heights
+0. **Sweep.** A coarse grid (:data:`~swarmpose.tracking.fit_settings.SWEEP`: gender × height) of
+   shapes, each with its own pose step, picks the start: poses tracked with the start body favour
+   shapes like it. Its heights
    are fixed, so E_H favours the candidate nearest the measured stature whatever its build
    (female-short started male); candidates moved to the stature instead fixed that subject and
    no count (BENCHMARKS.md, personalisation eighth part).

@@ -33,6 +33,7 @@ from dataclasses import replace
 import numpy as np
 
 from swarmpose.body.kinematics import root_turn_deg
+from swarmpose.tracking.budget import POLISH_CANDIDATES
 from swarmpose.tracking.pso import PsoResult
 from swarmpose.tracking.search import LIMB_COLUMNS, pose_bounds, renormalise
 
@@ -50,7 +51,7 @@ WITHOUT_ARMS[np.concatenate(LIMB_COLUMNS[:2])] = False
 
 def polish_pose(objective: Callable[[np.ndarray], np.ndarray], pose: np.ndarray, iterations: int,
                 rng: np.random.Generator, movable: np.ndarray | None = None,
-                candidates: int = 32) -> tuple[np.ndarray, float]:
+                candidates: int = POLISH_CANDIDATES) -> tuple[np.ndarray, float]:
     """The best pose (36,) found from ``pose`` (36,) and its value: ``iterations`` rounds of
     ``candidates`` poses each, scored in one batch by ``objective`` ((P, 36) -> (P,)).
     ``movable``: (36,) bool, the coordinates the search may move (None: all). With no

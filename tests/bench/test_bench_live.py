@@ -63,7 +63,6 @@ def test_a_short_live_run_publishes_poses_near_the_truth(side_wave):
                            tracker=TrackerConfig(particles=16, generations=8, polish=4, max_people=1))
     result = bench_live(config, seconds=2.0, offline=True, startup=False)
     assert result["poses"] >= 3 and result["poses_per_s"] > 0
-    assert result["camera_frames"] > result["published"] - 1  # every published frame was served first
     assert result["latency_ms"]["p95"] >= result["latency_ms"]["median"] > 0
     assert result["live_mm"] < 150 and result["offline_mm"] < 150
     assert result["client_floor_mm"] is not None and result["stage_ms"]["search"] > 0

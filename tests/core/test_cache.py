@@ -55,8 +55,9 @@ def test_the_builtin_body_from_the_cache_is_the_body_meshed_anew(monkeypatch, tm
         again = parametric.build_parametric_body()
     finally:
         parametric.build_parametric_body.cache_clear()
-    fresh = parametric._mesh_body(parametric.BodyShape(), 0.01)
+    fresh = parametric._mesh_arrays(parametric.BodyShape(), 0.01)
+    assert set(fresh) == set(parametric._ARRAYS)
     for name in parametric._ARRAYS:
-        np.testing.assert_array_equal(getattr(again, name), getattr(fresh, name))
-        np.testing.assert_array_equal(getattr(stored, name), getattr(fresh, name))
-    assert (again.name, again.bone_names, again.point_names) == (fresh.name, fresh.bone_names, fresh.point_names)
+        np.testing.assert_array_equal(getattr(again, name), fresh[name])
+        np.testing.assert_array_equal(getattr(stored, name), fresh[name])
+    assert again.name == stored.name == "builtin" and again.bone_names == parametric.BONE_NAMES

@@ -6,7 +6,8 @@ import time
 
 import pytest
 
-from swarmpose.pipeline.schedule import SMOOTHING, JustInTime
+from swarmpose.pipeline.schedule import JustInTime
+from swarmpose.tracking.budget import SMOOTHING
 
 
 def test_no_wait_until_both_durations_are_known_and_the_tracker_is_busy():
@@ -37,3 +38,15 @@ def test_detection_waits_for_the_tracker_less_its_own_time(monkeypatch):
     timing.tracking()
     now[0] += 0.5
     assert timing.wait_s() == 0.0  # overdue: never negative
+
+
+def test_a_waiting_detection_wakes_when_the_tracker_finishes_early():
+    import threading
+
+    timing = JustInTime()
+    timing.track_s, timing.detect_s = 5.0, 0.01  # a slow frame's mean: detection would wait about 5 s
+    timing.tracking()
+    threading.Timer(0.05, timing.tracked).start()
+    started = time.monotonic()
+    timing.wait()
+    assert time.monotonic() - started < 2.0 and timing.wait_s() == 0.0

@@ -356,6 +356,7 @@ def test_serving_a_recording_without_a_rate_warns_and_assumes_30_fps(wave_sequen
         assert ("records no frame rate" in caplog.text) == warned
 
 
+@pytest.mark.slow
 def test_a_looped_recording_starts_its_tracks_afresh(wave_sequence, body):
     """Each pass over a looped recording is a new take: its first frame starts a new track (state
     init), not a continuation of the last frame's, where the person was somewhere else."""

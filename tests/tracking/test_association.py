@@ -93,15 +93,17 @@ def test_a_body_following_a_hidden_person_is_no_false_positive():
 
 def test_the_gate_widens_with_the_frames_dropped_since_the_last_tracked_one():
     """Live, frames dropped between two tracked ones let a person move further: 1 m away after the
-    next frame is another person, 1 m away 20 dropped frames later (0.8 + 20 x 0.05 m) the same one."""
+    next frame is another person, 1 m away 20 dropped frames later (0.8 + 20 x 0.05 m) the same one.
+    Offline no frame is dropped: a gap (frames the source could not deliver) leaves the gate as it is."""
     from types import SimpleNamespace
 
     from swarmpose.tracking.people_tracker import DROPPED_GATE_M, GATE_M, PeopleTracker, Track
 
     people = [SimpleNamespace(segment=object())]
     moved = [np.array([1.0, 0.0, 3.0])]
-    for dropped, paired in ((0, False), (20, True)):
+    for dropped, live, paired in ((0, True, False), (20, True, True), (20, False, False)):
         tracker = PeopleTracker(lambda body_id: None)
+        tracker.live = live
         tracker.tracks = [Track(0, None, np.array([0.0, 0.0, 3.0]), last_frame=10)]
         tracker._last_index = 10
         result = tracker._associate(11 + dropped, people, moved, [None])

@@ -12,10 +12,12 @@ def test_no_budget_or_no_measurement_keeps_the_configured_search():
 
 def test_the_time_left_is_shared_three_to_one_between_swarm_and_polish():
     budget = FrameBudget(ms_per_pose=0.05, other_ms=20.0)  # 80 ms left: 60 for the swarm, 20 for the polish
-    assert budget.plan(100.0, 64, 64, 60) == (int(60 / (64 * 0.05)) - 1, int(20 / (32 * 0.05)))  # (17, 12)
+    # 60 ms / (64 poses x 0.05 ms) = 18.75 scored sets: 18, less generation 0's; 20 ms / (32 x 0.05) = 12.5 rounds
+    assert budget.plan(100.0, 64, 64, 60) == (17, 12)
     assert budget.plan(100.0, 64, 10, 5) == (10, 5)  # never more than configured
     assert budget.plan(10.0, 64, 64, 60) == (MIN_GENERATIONS, 0)  # nothing left: the least swarm
-    assert budget.plan(100.0, 64, 64, 0)[0] == int(80 / (64 * 0.05)) - 1  # no polish: all to the swarm
+    assert budget.plan(10.0, 8, 4, 2) == (4, 0)  # fewer configured than the least: the configured ones
+    assert budget.plan(100.0, 64, 64, 0)[0] == 24  # no polish: all 80 ms to the swarm, 25 sets less generation 0
 
 
 def test_the_cost_model_is_a_running_mean():
