@@ -63,14 +63,12 @@ def start_subscriber(endpoint: str, camera: str, count: int) -> tuple[subprocess
 
 
 def wait_for_subscriber(zenoh_sink, lines: list[str], timeout_s: float) -> bool:
-    """True once the subscriber has declared its subscription and the worker's zenoh session sees it."""
+    """True once the subscriber says it listens and the worker's frame publisher matches its
+    subscription (so no frame is published before the subscriber can get it)."""
     from swarmpose.core.polling import wait_until
 
-    ready = wait_until(lambda: zenoh_sink.state()["peers"] > 0 and any(line.startswith("listening on")
-                                                                      for line in lines), timeout_s, 0.1)
-    if ready:
-        time.sleep(0.3)  # let the subscription's declaration reach the worker
-    return ready
+    return wait_until(lambda: zenoh_sink.frames_subscribed() and any(line.startswith("listening on")
+                                                                     for line in lines), timeout_s, 0.1)
 
 
 def run_demo(sequence: Path, out: Path, particles: int, generations: int, quiet: bool, frames: int) -> int:

@@ -200,6 +200,16 @@ class ZenohSink:
         return {"mode": self.mode, "connect": list(self.connect), "listen": list(self.listen), "peers": peers,
                 "routers": routers, "warning": warning}
 
+    def frames_subscribed(self) -> bool:
+        """True while some subscriber matches this camera's frame key (zenoh's matching status)."""
+        publisher = self._publishers.get("frame")
+        if publisher is None:
+            return False
+        try:
+            return bool(publisher.matching_status.matching)
+        except Exception:  # the session may be closing
+            return False
+
     def close(self) -> None:
         """Withdraw the liveliness token and close the session (idempotent). Info queries being
         answered get their reply first (waits up to ``ANSWER_GRACE_S``); later ones get none."""

@@ -107,7 +107,7 @@ def test_a_plain_zenoh_subscriber_gets_valid_frames_status_info_and_liveliness(w
         holder_sink = HoldAtFrame(1, answered)
         worker = worker_on(wave_sequence, body, sink, holder_sink)
         holder["info"] = lambda: info_message("cam0", intrinsics=worker.intrinsics, body=body, source=worker.source_uri)
-        time.sleep(0.3)
+        assert wait_until(sink.frames_subscribed)  # the subscription has reached the worker
         gate = threading.Event()
         runner = threading.Thread(target=lambda: (worker.run(), gate.set()))
         runner.start()
@@ -137,6 +137,28 @@ def test_a_plain_zenoh_subscriber_gets_valid_frames_status_info_and_liveliness(w
     finally:
         sink.close()
         sub.close()
+
+
+def test_the_sink_knows_when_a_subscriber_matches_its_frames():
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    sink = ZenohSink("cam3", lambda: {}, listen=[endpoint], multicast=False)
+    sub = plain_session(connect=endpoint)
+    try:
+        assert wait_until(lambda: sink.state()["peers"] == 1)
+        status_only = sub.declare_subscriber("swarmpose/cam3/status", lambda s: None)
+        other_camera = sub.declare_subscriber("swarmpose/cam4/frame", lambda s: None)
+        time.sleep(0.5)
+        assert not sink.frames_subscribed()
+        frames = sub.declare_subscriber("swarmpose/*/frame", lambda s: None)
+        assert wait_until(sink.frames_subscribed)
+        frames.undeclare()
+        assert wait_until(lambda: not sink.frames_subscribed())
+        status_only.undeclare()
+        other_camera.undeclare()
+    finally:
+        sub.close()
+        sink.close()
+    assert not sink.frames_subscribed()
 
 
 def test_an_info_query_being_answered_when_the_sink_closes_gets_its_reply():
@@ -205,7 +227,7 @@ def test_the_client_api_delivers_by_iterator_and_callback(wave_sequence, body):
             assert client.alive() == ["cam0"]
             # a worker answering with an invalid info message is rejected, not passed on
             assert client.info(timeout=2.0) == [] and client.rejected == 1 and "swarmpose.info" in client.last_error
-            time.sleep(1.0)
+            assert wait_until(sink.frames_subscribed)
             runner = threading.Thread(target=worker_on(wave_sequence, body, sink).run)
             runner.start()
             frames = list(client.frames(timeout=30, count=6))
