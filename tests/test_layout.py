@@ -10,6 +10,7 @@ from pathlib import Path
 from swarmpose.cli.main import build_parser
 from swarmpose.core.settings import leaves
 from swarmpose.pipeline.config import ServiceConfig
+from swarmpose.pipeline.features import unavailable_settings
 from swarmpose.tracking.config import TrackerConfig
 
 if sys.version_info >= (3, 11):
@@ -46,13 +47,15 @@ def test_no_module_is_long():
     assert not long, f"split these modules: {long}"
 
 
-def test_every_tracker_setting_is_a_flag_of_every_tracking_command():
+def test_every_tracker_setting_is_a_flag_of_every_tracking_command_that_can_run_it():
     parser = build_parser()
     commands = parser._subparsers._group_actions[0].choices
+    refused = {"threaded": {"--" + name for name in unavailable_settings("threaded")}}
     tracker = {"--" + name.replace("_", "-") for name in leaves(TrackerConfig)}
     shared = {"--source", "--detector", "--body", "--shape", "--frames", "--camera-id", "--overlay", "--config"}
-    for command in ("track", "eval", "serve", "replay"):
+    for command, driver in (("track", "offline"), ("eval", "offline"), ("serve", "threaded"), ("replay", "threaded")):
         flags = {s for a in commands[command]._actions for s in a.option_strings}
-        assert tracker | shared <= flags, (command, sorted(tracker | shared - flags))
+        wanted = (tracker | shared) - refused.get(driver, set())
+        assert wanted <= flags, (command, sorted(wanted - flags))
     service_flags = {s for a in commands["serve"]._actions for s in a.option_strings}
-    assert {"--" + n.replace("_", "-") for n in leaves(ServiceConfig)} <= service_flags
+    assert {"--" + n.replace("_", "-") for n in leaves(ServiceConfig)} - refused["threaded"] <= service_flags

@@ -7,8 +7,9 @@ import json
 from pathlib import Path
 
 from swarmpose.bench.matrix import DETECTORS, MODES, SUBSETS
+from swarmpose.bench.store import BENCH_SETTINGS
 from swarmpose.bench.utdmhad_names import ACTIONS, SHAPES, SUBJECTS
-from swarmpose.cli.common import DEFAULTS, add_body_options, non_negative_float, non_negative_int, positive_int, quiet
+from swarmpose.cli.common import DEFAULTS, add_body_options, non_negative_float, positive_int, quiet
 from swarmpose.cli.settings import add_flags, from_args
 from swarmpose.cli.track import TRACK_SETTINGS, add_source_argument, settings_of
 from swarmpose.core.errors import ConfigError
@@ -16,6 +17,12 @@ from swarmpose.core.settings import parse_size
 from swarmpose.pipeline.config import ServiceConfig
 from swarmpose.sources.utdmhad_sync import DEPTH_LAG_FRAMES
 from swarmpose.tracking.config import TrackerConfig
+
+LIVE_SETTINGS = (*(s for s in TRACK_SETTINGS if s not in ("frames", "overlay", "view", "view_url", "view_port", "rrd")),
+                 "rate", "frame_budget_ms")
+"""The settings ``bench live`` takes: a served run's, without the outputs it does not write."""
+OVERLAY_SETTINGS = ("particles", "generations", "max_people")
+"""The tracker settings ``bench overlays`` takes."""
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -79,8 +86,7 @@ def cmd_bench_accuracy(args: argparse.Namespace) -> int:
     from swarmpose.bench.accuracy import mean_over_seeds, run_matrix
     from swarmpose.bench.accuracy_report import format_summary, format_table, plot_heatmap
 
-    tracker = {"particles": args.particles, "generations": args.generations, "max_people": args.max_people,
-               **_tracker_switches(args)}
+    tracker = {**_tracker_settings(args), "max_people": args.max_people}
     records = run_matrix(Path(args.out), subset=args.subset, detectors=args.detectors, modes=args.modes,
                          frames=args.frames, tracker=tracker, assets=args.assets, progress=not quiet(args),
                          seeds=args.seeds)
@@ -103,8 +109,7 @@ def cmd_bench_utdmhad(args: argparse.Namespace) -> int:
     from swarmpose.bench.utdmhad import run_utdmhad
     from swarmpose.bench.utdmhad import summary as utdmhad_summary
 
-    tracker = {"particles": args.particles, "generations": args.generations, "auto_height": args.auto_height,
-               **_tracker_switches(args)}
+    tracker = _tracker_settings(args, ("auto_height",))
     records = run_utdmhad(Path(args.out), modes=args.modes, detectors=args.detectors, shapes=args.shapes,
                           frames=args.frames, tracker=tracker, subjects=args.subjects,
                           actions=tuple(int(a) for a in args.actions), assets=args.assets,
@@ -131,7 +136,8 @@ def cmd_bench_overlays(args: argparse.Namespace) -> int:
     """Overlay pictures of the tracker on the real Kinect frames without ground truth."""
     from swarmpose.bench.qualitative import write_overlays
 
-    settings = {"particles": args.particles, "generations": args.generations, "max_people": args.max_people}
+    config = from_args(TrackerConfig, args)
+    settings = {name: getattr(config, name) for name in OVERLAY_SETTINGS}
     report = write_overlays(Path(args.out), detector=args.detector, assets=args.assets, settings=settings)
     print(json.dumps(report) if args.json else "\n".join(
         f"{args.out}/{name}: {', '.join(r['states'])}" for name, r in report.items()))
@@ -143,50 +149,11 @@ def _add_assets(p: argparse.ArgumentParser) -> None:
                    help="shared assets folder (default: $SWARMPOSE_ASSETS or ../shared/assets)")
 
 
-def _add_tracker_switches(p: argparse.ArgumentParser) -> None:
-    """--arm-prior, --limb-flips, --hidden-lifts, --arm-proposals, --hypotheses, --backward, --smoothing,
-    --ensemble and --polish of the resumable tracking benchmarks (a record keeps them, so a resume with other
-    values tracks again)."""
-    p.add_argument("--arm-prior", type=non_negative_float, default=0.0,
-                   help="the tracker's w_A (cost per rad² of the arms away from rest, times how side on the "
-                        "person stands; 0 = off, the tracker's default)")
-    p.add_argument("--limb-flips", action=argparse.BooleanOptionalAction, default=True,
-                   help="the tracker's depth flips of the limbs as particles (on: the tracker's default)")
-    p.add_argument("--hidden-lifts", action=argparse.BooleanOptionalAction, default=True,
-                   help="the lifts of limb joints the track's body hides leave the 3D term (on: the tracker's "
-                        "default)")
-    p.add_argument("--arm-proposals", action=argparse.BooleanOptionalAction, default=True,
-                   help="arms sent to unexplained depth within reach and to the other arm's mirror image as "
-                        "particles (on: the tracker's default)")
-    p.add_argument("--hypotheses", type=int, choices=range(5), default=2, metavar="N",
-                   help="the best N limb flips and arm proposals each refined by a sub-swarm before they compete "
-                        "(0-4; 2: the tracker's default; 0: single particles, as before)")
-    p.add_argument("--backward", type=non_negative_int, default=0, metavar="N",
-                   help="the offline backward pass: every N frames each track run backwards over them from its "
-                        "last solution (0: off, the tracker's default; N >= --frames: the whole sequence)")
-    p.add_argument("--smoothing", choices=("off", "centred"), default="off",
-                   help="centred: each published pose smoothed with the frames either side (the recordings' "
-                        "smoothing at its default sigma, 0.05 s; off: the tracker's default)")
-    p.add_argument("--ensemble", type=positive_int, default=1, metavar="N",
-                   help="each sequence tracked N times with PSO seeds seed .. seed + N - 1, the joints averaged "
-                        "(1: off, the tracker's default; not with --backward; the lift mode tracks once)")
-    p.add_argument("--polish", type=non_negative_int, default=60, metavar="N",
-                   help="N rounds of the local polish after each frame's search, hybrid mode only (60: the tracker's "
-                        "default; 0: off)")
-
-
-def _tracker_switches(args: argparse.Namespace) -> dict:
-    """The values of :func:`_add_tracker_switches`' options, by their tracker setting's name."""
-    names = ("arm_prior", "limb_flips", "hidden_lifts", "arm_proposals", "hypotheses", "backward", "smoothing",
-             "ensemble", "polish")
-    return {name: getattr(args, name) for name in names}
-
-
-def _add_budget_and_assets(p: argparse.ArgumentParser) -> None:
-    """--particles, --generations (the tracker's budget) and --assets of the tracking benchmarks."""
-    p.add_argument("--particles", type=positive_int, default=64, help="PSO particles")
-    p.add_argument("--generations", type=positive_int, default=64, help="PSO generations")
-    _add_assets(p)
+def _tracker_settings(args: argparse.Namespace, extra: tuple[str, ...] = ()) -> dict:
+    """The values of the tracker settings a benchmark took as flags (:data:`BENCH_SETTINGS` and
+    ``extra``), over the environment, config file and :class:`TrackerConfig`'s defaults."""
+    config = from_args(TrackerConfig, args)
+    return {name: getattr(config, name) for name in (*BENCH_SETTINGS, *extra)}
 
 
 def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
@@ -219,7 +186,7 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
                          help="serve a recording at its rate (looped) and report what a client sees: poses/s, "
                               "latency, start-up, live and client Δ")
     add_source_argument(p)
-    add_flags(p, ServiceConfig, (*TRACK_SETTINGS, "rate", "frame_budget_ms"))
+    add_flags(p, ServiceConfig, LIVE_SETTINGS)
     p.add_argument("--seconds", type=non_negative_float, default=20.0,
                    help="how long to serve after the first pose")
     p.add_argument("--offline", action=argparse.BooleanOptionalAction, default=True,
@@ -251,8 +218,8 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
     p.add_argument("--seeds", type=positive_int, default=1,
                    help="tracker seeds per cell and mode; the table and heat map show the mean over them "
                         "(a cell's Δ varies between seeds)")
-    _add_budget_and_assets(p)
-    _add_tracker_switches(p)
+    _add_assets(p)
+    add_flags(p, TrackerConfig, BENCH_SETTINGS)
     p.add_argument("--json", action="store_true", help="one JSON object with every record")
     p.set_defaults(func=cmd_bench_accuracy)
     p = bench.add_parser("utdmhad", parents=[common], formatter_class=DEFAULTS,
@@ -266,8 +233,6 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
                    help="default: the body's default shape (scaled to the person by the tracker's automatic "
                         "height unless --no-auto-height); measured: the subject's height measured on the first "
                         "frames of their sequences")
-    p.add_argument("--auto-height", action=argparse.BooleanOptionalAction, default=True,
-                   help="the tracker's automatic height for the default shape (on: the tracker's default)")
     p.add_argument("--subjects", type=_names(SUBJECTS), default=",".join(SUBJECTS), help="comma-separated subjects")
     p.add_argument("--actions", type=_names(tuple(str(a) for a in ACTIONS)), default=(),
                    help="comma-separated action numbers 1..27 (default: all)")
@@ -277,8 +242,8 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
     p.add_argument("--seeds", type=positive_int, default=1,
                    help="PSO seeds per sequence and variant; the table and summary average over them (a change of "
                         "the search moves single sequences by 10 mm)")
-    _add_budget_and_assets(p)
-    _add_tracker_switches(p)
+    _add_assets(p)
+    add_flags(p, TrackerConfig, (*BENCH_SETTINGS, "auto_height"))
     p.add_argument("--json", action="store_true", help="one JSON object with the summary and every record")
     p.set_defaults(func=cmd_bench_utdmhad)
     p = bench.add_parser("overlays", parents=[common], formatter_class=DEFAULTS,
@@ -286,7 +251,7 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
     p.add_argument("--out", default="docs/qualitative", help="folder of the pictures")
     p.add_argument("--detector", choices=[d for d in DETECTORS if d != "simulated"], default="movenet",
                    help="2D network")
-    p.add_argument("--max-people", type=positive_int, default=6, help="people tracked per frame")
-    _add_budget_and_assets(p)
+    _add_assets(p)
+    add_flags(p, TrackerConfig, OVERLAY_SETTINGS)
     p.add_argument("--json", action="store_true", help="one JSON object")
     p.set_defaults(func=cmd_bench_overlays)

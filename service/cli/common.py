@@ -21,7 +21,15 @@ def stop_on_signals(stop: Callable[[], object], stack: ExitStack) -> None:
 
 
 class DefaultsFormatter(argparse.HelpFormatter):
-    """Help that shows each option's default, unless its text already does or there is none."""
+    """Help that shows each option's default, unless its text already does or there is none; its
+    usage line names the positionals and required options, the rest as ``[options]``."""
+
+    def _format_usage(self, usage, actions, groups, prefix):  # noqa: ANN001, ANN202 (argparse's signature)
+        if usage is not None:
+            return super()._format_usage(usage, actions, groups, prefix)
+        named = [a for a in actions if (not a.option_strings or a.required) and a.help is not argparse.SUPPRESS]
+        text = super()._format_usage(None, named, [], prefix)
+        return text.replace(self._prog, f"{self._prog} [options]", 1) if len(named) < len(actions) else text
 
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
@@ -41,6 +49,10 @@ def verbosity_parent(top: bool = False) -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="count", default=default, help="more log output (debug)")
     p.add_argument("-q", "--quiet", action="count", default=default,
                    help="less output: warnings only, no progress bars")
+    if not top:
+        from swarmpose.cli.settings import HelpAll
+
+        p.add_argument("--help-all", action=HelpAll)
     return p
 
 
@@ -87,6 +99,4 @@ def add_body_options(p: argparse.ArgumentParser) -> None:
     """``--body`` and ``--shape`` for the commands that take no other settings."""
     p.add_argument("--body", default="builtin", help="'builtin', 'makehuman:DIR' or a .glb/.gltf file")
     p.add_argument("--shape", default=None,
-                   help="shape preset: builtin presets (default, male, female, male-heavy, ...) or "
-                        "'height=1.8,torso=1.1,arms=1,legs=1'; MakeHuman presets (male, female, male-heavy, "
-                        "female-slim, male-tall, female-short, ...)")
+                   help="body shape: a preset (male, female, ...) or sliders (height=1.8,... or gender=0.3,...)")

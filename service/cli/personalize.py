@@ -14,7 +14,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from swarmpose.cli.common import DEFAULTS, non_negative_int, positive_int, quiet
-from swarmpose.cli.settings import add_flags
+from swarmpose.cli.settings import add_flags, advanced
 from swarmpose.cli.track import TRACK_SETTINGS, add_source_argument, settings_of
 from swarmpose.core.errors import ConfigError
 from swarmpose.pipeline.config import ServiceConfig
@@ -71,16 +71,15 @@ def add_personalize_command(sub: argparse._SubParsersAction, common: argparse.Ar
                "coordinates", "floor")
     add_flags(p, ServiceConfig, tuple(s for s in TRACK_SETTINGS if s not in ignored))
     p.add_argument("--frames", type=positive_int, default=60, help="frames to read from the start of the source")
-    p.add_argument("--keyframes", type=positive_int, default=FitSettings.keyframes,
-                   help="well-spread frames the shape is fitted on")
-    p.add_argument("--rounds", type=positive_int, default=FitSettings.rounds,
-                   help="rounds of shape step then pose step")
-    p.add_argument("--own-pose-rounds", type=non_negative_int, default=FitSettings.own_pose_rounds,
-                   help="the last stage (MakeHuman bodies): rounds of the polish that gives each candidate shape "
-                        "poses of its own on every key frame (0: no last stage)")
-    p.add_argument("--own-pose-candidates", type=non_negative_int, default=FitSettings.own_pose_candidates,
-                   help="the last stage: about this many candidate shapes its search judges (the round that "
-                        "reaches it finishes; 0: no last stage)")
+    advanced(p.add_argument("--keyframes", type=positive_int, default=FitSettings.keyframes,
+                            help="well-spread frames the shape is fitted on"))
+    advanced(p.add_argument("--rounds", type=positive_int, default=FitSettings.rounds,
+                            help="rounds of shape step then pose step"))
+    advanced(p.add_argument("--own-pose-rounds", type=non_negative_int, default=FitSettings.own_pose_rounds,
+                            help="the last stage (MakeHuman bodies): polish rounds that give each candidate shape "
+                                 "its own poses (0: no last stage)"))
+    advanced(p.add_argument("--own-pose-candidates", type=non_negative_int, default=FitSettings.own_pose_candidates,
+                            help="the last stage: about this many candidate shapes judged (0: no last stage)"))
     p.add_argument("--out", required=True, help="the personalised body, .glb")
     p.add_argument("--config", dest="config_file", default=None, help="TOML file of settings ($SWARMPOSE_CONFIG)")
     p.add_argument("--json", action="store_true", help="one JSON object")

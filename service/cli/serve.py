@@ -26,12 +26,15 @@ from swarmpose.cli.track import add_source_argument, settings_of
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import leaves
 from swarmpose.pipeline.config import ServiceConfig
+from swarmpose.pipeline.features import unavailable_settings
 
 if TYPE_CHECKING:  # the worker and the protocol are imported by the commands that run them
     from swarmpose.pipeline.worker import Worker
 
 REPLAY_DEFAULTS = {"zenoh_mode": "off"}
-REPLAY_SETTINGS = tuple(name for name in leaves(ServiceConfig) if name not in ("loop", "record", "frame_budget_ms"))
+SERVE_SETTINGS = tuple(name for name in leaves(ServiceConfig) if name not in unavailable_settings("threaded"))
+"""The settings ``serve`` takes: all but the features its driver cannot run (:mod:`swarmpose.pipeline.features`)."""
+REPLAY_SETTINGS = tuple(name for name in SERVE_SETTINGS if name not in ("loop", "record", "frame_budget_ms"))
 """The settings ``replay`` takes: it writes into ``--out``, ends with the recording and tracks every frame
 with the full search."""
 def cmd_serve(args: argparse.Namespace) -> int:
@@ -119,7 +122,8 @@ def _service_parser(sub: argparse._SubParsersAction, common: argparse.ArgumentPa
 
 def add_service_commands(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     """Register ``serve``, ``replay`` and ``health``."""
-    p = _service_parser(sub, common, "serve", "track a camera or recording and publish over zenoh (long-running)")
+    p = _service_parser(sub, common, "serve", "track a camera or recording and publish over zenoh (long-running)",
+                        only=SERVE_SETTINGS)
     p.set_defaults(func=cmd_serve)
 
     p = _service_parser(sub, common, "replay", "track a recording into poses.jsonl/csv/bvh + overlay.mp4 (Δ, A(t) "

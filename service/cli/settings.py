@@ -48,28 +48,57 @@ def environment_names(cls: type) -> dict[str, str]:
 def add_flags(parser: argparse.ArgumentParser, cls: type, only: Iterable[str] | None = None,
               defaults: Mapping[str, Any] | None = None) -> None:
     """One flag per leaf setting of ``cls`` (or those in ``only``), default None so the other
-    layers show through; ``--help`` shows each default (``defaults`` over the dataclass')."""
+    layers show through; the help shows each default (``defaults`` over the dataclass'). The
+    everyday settings show in ``--help``, the others in an "advanced" group only ``--help-all``
+    shows (:func:`advanced`)."""
     wanted = None if only is None else set(only)
-    by_section: dict[str, argparse._ArgumentGroup] = {}
+    groups: dict[str, argparse._ArgumentGroup] = {}
     for name, (path, f) in leaves(cls).items():
         if wanted is not None and name not in wanted:
             continue
         meta = f.metadata
-        group = parser
-        if path:
-            group = by_section.setdefault(path[0], parser.add_argument_group(f"{path[0]} settings"))
+        group: argparse.ArgumentParser | argparse._ArgumentGroup = parser
+        if not meta["everyday"]:
+            title = f"advanced {path[0]} settings" if path else "advanced settings"
+            group = groups.get(title) or groups.setdefault(title, parser.add_argument_group(title))
         default = (defaults or {}).get(name, default_of(f))
         flag = "--" + name.replace("_", "-")
         names = [flag] + ["--" + a.replace("_", "-") for a in meta["aliases"]]
         text = f"{meta['help']} (default: {format_value(default)})"
         if meta["kind"] == "bool":
-            group.add_argument(*names, dest=name, default=None, action=argparse.BooleanOptionalAction, help=text)
+            action = group.add_argument(*names, dest=name, default=None, action=argparse.BooleanOptionalAction,
+                                        help=text)
         elif meta["kind"] == "list":
-            group.add_argument(*names, dest=name, default=None, action="append", metavar="VALUE",
-                               help=text + "; repeatable")
+            action = group.add_argument(*names, dest=name, default=None, action="append", metavar="VALUE",
+                                        help=text + "; repeatable")
         else:
-            group.add_argument(*names, dest=name, default=None, help=text,
-                               choices=meta["choices"] or None, metavar=None if meta["choices"] else name.upper())
+            action = group.add_argument(*names, dest=name, default=None, help=text, choices=meta["choices"] or None,
+                                        metavar=None if meta["choices"] else name.upper())
+        if not meta["everyday"]:
+            advanced(action)
+
+
+def advanced(action: argparse.Action) -> argparse.Action:
+    """Hide ``action`` from ``--help``; ``--help-all`` shows it (:class:`HelpAll`)."""
+    action.full_help = action.help  # type: ignore[attr-defined]
+    action.help = argparse.SUPPRESS
+    return action
+
+
+class HelpAll(argparse.Action):
+    """``--help-all``: the command's help with every option, the advanced ones too, then exit."""
+
+    def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS, default: Any = argparse.SUPPRESS,
+                 help: str = "show every option, the advanced ones too, and exit") -> None:
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
+                 option_string: str | None = None) -> None:
+        for action in parser._actions:
+            if hasattr(action, "full_help"):
+                action.help = action.full_help
+        parser.print_help()
+        parser.exit()
 
 
 def _belongs(path: tuple[str, ...], top: str) -> str:

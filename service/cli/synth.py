@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from swarmpose.cli.common import DEFAULTS, add_body_options, positive_int, quiet
+from swarmpose.cli.settings import advanced
 from swarmpose.core.errors import ConfigError
 
 if TYPE_CHECKING:  # the body, motion and renderer are imported by the commands that use them
@@ -105,13 +106,7 @@ def add_synth_command(sub: argparse._SubParsersAction, common: argparse.Argument
     p.add_argument("--motion", default=None, help="a BVH file (CMU, Mixamo or MakeHuman skeleton) or builtin:NAME "
                                                   "(wave, squat, walk, turn, jumping_jacks)")
     p.add_argument("--person", action="append", default=[], metavar="SPEC",
-                   help="a person of a multi-person scene, repeated (ids 1, 2, ... in this order): "
-                        "BODY:SHAPE:MOTION[@x,z[,yaw[,start]]] with BODY builtin, makehuman:DIR or a .glb, SHAPE a "
-                        "preset (empty = default), MOTION a BVH or builtin:NAME, x,z the start on the floor (m; with "
-                        "--camera-yaw 0, x grows to the image's right, z towards the camera), yaw (degrees) turning "
-                        "the motion "
-                        "(+90: walking towards the camera becomes walking to the image's right), start the seconds "
-                        "of the clip skipped; e.g. builtin:female:builtin:walk@1,0,-90")
+                   help="a person of a scene, repeatable: BODY:SHAPE:MOTION[@x,z[,yaw[,start]]] (README)")
     p.add_argument("--scene", default=None, metavar="FILE",
                    help="a JSON list of people {body, shape, motion, x, z, yaw, start} instead of --person")
     p.add_argument("--frames", type=positive_int, required=True, help="number of frames to write")
@@ -121,13 +116,12 @@ def add_synth_command(sub: argparse._SubParsersAction, common: argparse.Argument
     p.add_argument("--camera-distance", type=float, default=3.0,
                    help="metres from the subject's start, or from the centre of the people's starts (0.5..8)")
     p.add_argument("--camera-yaw", type=float, default=0.0, help="degrees around the subject, 0 = in front")
-    p.add_argument("--camera-height", type=float, default=1.2, help="lens height above the floor, metres")
-    p.add_argument("--skinning", choices=("dqs", "lbs"), default="dqs", help="skinning of the rendered body")
-    p.add_argument("--clothes", action=argparse.BooleanOptionalAction, default=False,
-                   help="colour each body by garment (skin at the head, forearms and hands; shirt; trousers; "
-                        "shoes) instead of one colour per person; for RGB networks of your own (MoveNet on the "
-                        "3-person crossing was no better for it: BENCHMARKS.md)")
-    p.add_argument("--layout", default="coco17", help="keypoint layout of the simulated detector")
+    advanced(p.add_argument("--camera-height", type=float, default=1.2, help="lens height above the floor, metres"))
+    advanced(p.add_argument("--skinning", choices=("dqs", "lbs"), default="dqs", help="skinning of the rendered body"))
+    advanced(p.add_argument("--clothes", action=argparse.BooleanOptionalAction, default=False,
+                            help="colour each body by garment (skin, shirt, trousers, shoes), not one colour a "
+                                 "person"))
+    advanced(p.add_argument("--layout", default="coco17", help="keypoint layout of the simulated detector"))
     p.set_defaults(func=cmd_synth)
 
 

@@ -24,6 +24,8 @@ KINDS = ("str", "int", "float", "bool", "list", "size", "float?")
 _TRUE, _FALSE = {"1", "true", "yes", "on"}, {"0", "false", "no", "off", ""}
 _NONE = {"", "none", "null", "auto"}
 T = TypeVar("T")
+HELP_MAX = 110
+"""The longest help text of a setting (characters): two lines of ``--help`` with its default."""
 
 
 def parse_bool(text: str) -> bool:
@@ -35,15 +37,20 @@ def parse_bool(text: str) -> bool:
 
 
 def setting(default: Any, help: str, *, kind: str | None = None, choices: tuple[str, ...] = (),
-            minimum: float | None = None, maximum: float | None = None, aliases: tuple[str, ...] = ()) -> Any:
+            minimum: float | None = None, maximum: float | None = None, aliases: tuple[str, ...] = (),
+            everyday: bool = False) -> Any:
     """A leaf setting. kind: inferred from ``default`` unless given; choices: allowed values
-    (str); minimum / maximum: inclusive numeric limits; aliases: older names still accepted."""
+    (str); minimum / maximum: inclusive numeric limits; aliases: older names still accepted;
+    everyday: its flag shows in a command's ``--help`` (the others only in ``--help-all``).
+    help: what it does, in at most :data:`HELP_MAX` characters."""
     if kind is None:
         kind = {bool: "bool", int: "int", float: "float", tuple: "list", str: "str"}[type(default)]
     if kind not in KINDS:
         raise ValueError(f"unknown setting kind {kind!r}")
+    if len(help) > HELP_MAX:
+        raise ValueError(f"the help of a setting is {len(help)} characters (at most {HELP_MAX}): {help!r}")
     meta = {"help": help, "kind": kind, "choices": tuple(choices), "minimum": minimum, "maximum": maximum,
-            "aliases": tuple(aliases)}
+            "aliases": tuple(aliases), "everyday": everyday}
     return field(default=default, metadata=meta)
 
 

@@ -25,6 +25,7 @@ from swarmpose.core.settings import with_settings
 from swarmpose.detect.joints import Detector
 from swarmpose.detect.registry import make_detector
 from swarmpose.pipeline.ensemble import ensemble_of
+from swarmpose.pipeline.features import refuse
 from swarmpose.pipeline.run import results, source_error
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
@@ -119,14 +120,7 @@ class Tracker:
         """Track one frame of a source (a skipped frame gives a result that says why)."""
         if self._closed:
             raise ConfigError("this Tracker is closed; make a new one")
-        if self.config.backward:
-            raise ConfigError(f"backward = {self.config.backward}: the backward pass needs the frames after this "
-                              "one; track a whole recording with swarmpose.track(source, backward=N), or set "
-                              "backward 0")
-        if self.config.centred_sigma_s:
-            raise ConfigError("smoothing centred averages each pose with the frames after it; track a whole "
-                              "recording with swarmpose.track(source, smoothing='centred'), or use "
-                              "smoothing='one-euro' frame by frame")
+        refuse("frame_by_frame", self.config)
         self._next_index = frame.index + 1
         return self.pipeline.process(frame)
 

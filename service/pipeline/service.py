@@ -26,6 +26,7 @@ from swarmpose.detect.registry import make_detector, resolve_detector
 from swarmpose.messages.build import info_message
 from swarmpose.pipeline.config import ServiceConfig
 from swarmpose.pipeline.ensemble import EnsemblePipeline, ensemble_of
+from swarmpose.pipeline.features import refuse
 from swarmpose.pipeline.status import HealthFileSink, LogSink, WorkerStats, latency_summary
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.pipeline.worker import Worker
@@ -188,18 +189,7 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
     files (``out`` or ``record``), the ground-truth scorer, the log, the health file, (with
     ``progress``) a progress bar, and last the caller's ``sinks``. replay: no dropped frames, no
     pacing, no looping. on_acquired: the worker's observer of the frames it takes from the source."""
-    if config.tracker.backward:  # before anything is opened
-        raise ConfigError(f"backward = {config.tracker.backward}: the backward pass publishes frames late and needs "
-                          "the recording, which serve and replay do not wait for; run `swarmpose track SOURCE --out "
-                          "DIR --backward N` (the same files as replay), or set backward 0")
-    if config.tracker.ensemble > 1:
-        raise ConfigError(f"ensemble = {config.tracker.ensemble}: serve and replay detect and track in two threads, "
-                          "one track per person; run `swarmpose track SOURCE --out DIR --ensemble N` (the same files "
-                          "as replay), or the Python API's Tracker, or set ensemble 1")
-    if config.tracker.centred_sigma_s:
-        raise ConfigError("smoothing centred averages each pose with the frames after it, which serve and replay "
-                          "do not wait for; run `swarmpose track SOURCE --out DIR --smoothing centred` (the same "
-                          "files as replay), or use smoothing one-euro live")
+    refuse("threaded", config.tracker)  # before anything is opened
     parts = open_parts(config, stack, out=out or config.record)
     worker: Worker | None = None
 

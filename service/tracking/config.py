@@ -23,8 +23,9 @@ MODE_WEIGHTS = {"hybrid": (3.0, 1.0), "depth": (1.0, 0.0), "joints": (0.0, 1.0)}
 class TrackerConfig:
     """The tracker's settings (paper §2.3-2.4 where it names them)."""
 
-    mode: str = setting("hybrid", "objective: hybrid (w_D=3, w_J=1), depth (w_J=0; joints only (re)start), "
-                                  "joints (w_D=0), lift (J^e as the answer, no model)", choices=MODES)
+    mode: str = setting("hybrid", "objective: hybrid (w_D=3, w_J=1), depth (w_J=0), joints (w_D=0) or lift (J^e, no "
+                                  "model)", choices=MODES)
+    """depth mode: the joints still (re)start a track."""
     particles: int = setting(64, "PSO particles per generation", minimum=1)
     generations: int = setting(64, "PSO generations per frame", minimum=1)
     pso: str = setting("perturbed", "PSO variant", choices=VARIANTS)
@@ -32,85 +33,81 @@ class TrackerConfig:
     joints_weight: float | None = setting(None, "w_J (auto: the mode's)", kind="float?", minimum=0)
     tile: tuple[int, int] = setting((64, 64), "depth tile WxH pixels over the person's box", kind="size")
     triangles: int = setting(1500, "tracking level of detail of the body mesh, triangles", minimum=100)
-    coarse_share: float = setting(0.0, "share of each PSO's generations scored coarse (coarse_tile, "
-                                       "coarse_triangles) before the rest at full resolution (0 = off: every "
-                                       "schedule measured cost accuracy, BENCHMARKS.md issue 13)",
-                                  minimum=0.0, maximum=1.0)
+    coarse_share: float = setting(0.0, "share of each PSO's generations scored at the coarse tile and triangles "
+                                       "(0 = off)", minimum=0.0, maximum=1.0)
+    """Every schedule measured cost accuracy (BENCHMARKS.md, issue 13), so it is off."""
     coarse_tile: tuple[int, int] = setting((32, 32), "depth tile WxH pixels of the coarse generations", kind="size")
     coarse_triangles: int = setting(500, "level of detail of the body mesh in the coarse generations, triangles",
                                     minimum=100)
-    max_people: int = setting(6, "track up to this many people, each found in the depth and detected on its own "
-                                 "crop (1: one person, no segmentation)", minimum=1, maximum=32)
+    max_people: int = setting(6, "track up to this many people (1: one person, no segmentation)", minimum=1,
+                              maximum=32, everyday=True)
+    """Each person is found in the depth and detected on a crop of their own."""
     retire_frames: int = setting(30, "frames a person may go unseen (occluded, crossing) before its id is retired",
                                  minimum=0)
-    personalize: int = setting(0, "personalise the body from each person's first N tracked frames, then lock the "
-                                  "shape (0 = off, else 3..300; needs --body makehuman:DIR or builtin)", minimum=0,
-                           maximum=300)
+    personalize: int = setting(0, "fit each person's body shape on their first N tracked frames, then lock it "
+                                  "(0 = off, else 3..300)", minimum=0, maximum=300)
+    """Needs a body with a shape space: ``builtin`` or ``makehuman:DIR``."""
     seed: int = setting(0, "PSO seed (a run repeats exactly with the same seed)", minimum=0)
-    start_budget: int = setting(64, "the start's PSOs per facing run at least this many particles and generations "
-                                    "(once per track)", minimum=1)
-    recheck: int = setting(10, "every this many frames, and on a new track's 1st, 2nd and 4th, refit the start's "
-                               "facings from the detection and let them compete with the track (0 = off, both)",
+    start_budget: int = setting(64, "least particles and generations of a track's start, per facing", minimum=1)
+    recheck: int = setting(10, "refit the start's facings every N frames and let them compete (0 = off)",
                            minimum=0)
-    label_swaps: bool = setting(True, "a detected left/right pair may match the model's pair crossed, at a cost "
-                                      "(detectors swap sides on people seen from behind)")
+    """Also on a new track's 1st, 2nd and 4th frame (:data:`swarmpose.tracking.body_tracker.YOUNG_RECHECKS`)."""
+    label_swaps: bool = setting(True, "a detected left/right pair may match the model's pair crossed, at a cost")
+    """Detectors swap sides on people seen from behind."""
     penetration: float = setting(1.0, "w_P: cost per cm of an elbow or wrist inside the torso (0 = off)",
                                  minimum=0.0)
-    arm_prior: float = setting(0.0, "w_A: cost per rad² of the arms' angles away from the rest pose, times how "
-                                    "side on the person stands (0 = off; 1 holds the arms a side view hides)",
-                               minimum=0.0)
-    limb_flips: bool = setting(True, "every frame, each limb of the last solution mirrored along the line of sight "
-                                     "(same image, other depth) joins the swarm as a particle")
-    arm_proposals: bool = setting(True, "every frame, each arm of the last solution sent to observed depth within its "
-                                        "reach that the body does not explain, and to the other arm's mirror "
-                                        "image, joins the swarm as a particle")
-    hypotheses: int = setting(2, "every frame, the best this many of the limb flips and arm proposals each start "
-                                 "a sub-swarm (3/16 of the particles, 12 of 64) that refines it apart from the track "
-                                 "for the first 3/4 of the generations before they compete (0 = off: single "
-                                 "particles)",
-                              minimum=0, maximum=4)
-    hidden_lifts: bool = setting(True, "a limb joint the last solution hides behind its own body, where the depth "
-                                       "shows that occluder, leaves the 3D joint term (its lift measured the "
-                                       "occluder); the 2D term keeps it")
-    polish: int = setting(60, "after each frame's search, this many rounds of a local search (32 poses each) take "
-                              "the best pose's root, spine, neck and legs further down the same objective (on a young "
-                              "track the best of each facing in the swarm, before they compete); the arms stay the "
-                              "search's (0 = off: about a sixth more tracked frames/s; BENCHMARKS.md)", minimum=0)
-    backward: int = setting(0, "offline runs (track, eval, the Python API's track): every this many frames, each "
-                               "person's track is run backwards over them from its last solution, and those "
-                               "frames get the backward fit, published this many frames late (a track's start "
-                               "and a side view's limbs settle over frames, which the backward pass starts "
-                               "with); 0 = off. Not with serve, replay or Tracker.track_frame (live), the lift "
-                               "mode or one-euro smoothing (centred smoothing runs after it)",
-                            minimum=0)
-    ensemble: int = setting(1, "track every frame this many times, with PSO seeds seed, seed + 1, ..., and publish "
-                               "the first track's people with each joint the confidence-weighted mean of the tracks' "
-                               "(the pose fitted to it): a joint the depth and the detector leave open lands "
-                               "elsewhere in each track, and their mean is nearer (this many times the time per "
-                               "frame; 1 = off). Not with serve or replay, the backward pass or the lift mode",
-                            minimum=1, maximum=16)
-    auto_height: bool = setting(True, "a body whose shape is not given (no --shape, not a .glb) is scaled to each "
-                                      "person's height, measured on the depth of their first upright frames")
-    smoothing: str = setting("off", "smooth the published poses: off (as in evaluation), one-euro (a One-Euro "
-                                    "filter, live) or centred (recordings only: each joint read off a straight line "
-                                    "fitted, Gaussian-weighted, through the person's positions of it within 3 "
-                                    "sigma either side, the pose fitted to those joints; published 3 sigma late); "
-                                    "the search always starts from the unsmoothed pose",
+    arm_prior: float = setting(0.0, "w_A: cost per rad² of the arms away from rest, times how side-on the person "
+                                    "stands (0 = off)", minimum=0.0)
+    """1 holds the arms a side view hides."""
+    limb_flips: bool = setting(True, "each limb of the last pose mirrored along the line of sight joins the swarm")
+    """Same image, other depth: one particle per limb, every frame."""
+    arm_proposals: bool = setting(True, "each arm sent to unexplained depth within its reach joins the swarm")
+    """Every frame, each arm of the last solution is sent to observed depth within its reach that the
+    body does not explain, and to the other arm's mirror image; each such pose is a particle."""
+    hypotheses: int = setting(2, "the best N limb flips and arm proposals each refine in a sub-swarm first "
+                                 "(0 = off)", minimum=0, maximum=4)
+    """Each sub-swarm has 3/16 of the particles (12 of 64) and refines its proposal apart from the
+    track for the first 3/4 of the generations before they compete; 0: single particles."""
+    hidden_lifts: bool = setting(True, "a joint hidden behind the body's own depth leaves the 3D joint term")
+    """Its lift measured the occluder; the 2D term keeps it."""
+    polish: int = setting(60, "rounds of local search (32 poses each) after each frame's search (0 = off)",
+                          minimum=0)
+    """They take the best pose's root, spine, neck and legs further down the same objective (on a
+    young track the best of each facing, before they compete); the arms stay the search's. Off:
+    about a sixth more tracked frames/s (BENCHMARKS.md)."""
+    backward: int = setting(0, "offline: every N frames refit each track backwards over them, published N frames "
+                               "late (0 = off)", minimum=0)
+    """A track's start and a side view's limbs settle over frames, which the backward pass starts
+    with. Offline drivers only (:mod:`swarmpose.pipeline.features`); not with the lift mode or
+    one-euro smoothing (centred smoothing runs after it)."""
+    ensemble: int = setting(1, "offline: track every frame N times (seeds seed..seed+N-1) and publish the "
+                               "mean (1 = off)", minimum=1, maximum=16)
+    """The first track's people are published, each joint the confidence-weighted mean of the
+    tracks' (the pose fitted to it): a joint the depth and the detector leave open lands elsewhere
+    in each track, and their mean is nearer. N times the time per frame. Offline drivers only
+    (:mod:`swarmpose.pipeline.features`); not with the backward pass or the lift mode."""
+    auto_height: bool = setting(True, "scale a body whose shape is not given to each person's measured height")
+    """Measured on the depth of their first upright frames; not with --shape or a .glb body."""
+    smoothing: str = setting("off", "smooth the published poses: off, one-euro (live) or centred (offline)",
                              choices=SMOOTHING)
+    """centred: each joint is read off a straight line fitted, Gaussian-weighted, through the
+    person's positions of it within 3 sigma either side, the pose fitted to those joints; published
+    3 sigma late. The search always starts from the unsmoothed pose."""
     smoothing_sigma_s: float = setting(0.05, "centred: the Gaussian's sigma in time, s (larger: steadier, "
                                              "fast motion flattened)", minimum=0.001, maximum=1.0)
     smoothing_cutoff_hz: float = setting(4.0, "One-Euro: the cut-off at rest, Hz (lower: steadier, more lag)",
                                          minimum=0.01)
-    smoothing_beta: float = setting(10.0, "One-Euro: how fast the cut-off rises with speed, s per m or rad (higher: "
-                                         "less lag in fast motion)", minimum=0.0)
+    smoothing_beta: float = setting(10.0, "One-Euro: how fast the cut-off rises with speed, s per m or rad",
+                                    minimum=0.0)
+    """Higher: less lag in fast motion."""
     device: str = setting("", "OpenCL device: cpu, gpu, PLATFORM:DEVICE or part of its name (empty: a GPU, "
                               "else PoCL)", aliases=("cl_device",))
     alpha: float = setting(0.97, "share of the 2D term in E_J (the rest is the 3D term)", minimum=0.0, maximum=1.0)
     threshold_m: float = setting(0.30, "T: depth differences are clipped at this many metres", minimum=0.01)
     min_score: float = setting(0.3, "detected keypoints below this score are ignored", minimum=0.0, maximum=1.0)
     lost_joint_error: float = setting(0.12, "lost when the 2D joints are off by more than this share of the "
-                                            "person's size (not while others hide part of the person and the "
-                                            "depth agrees: README, several people)", minimum=0.0)
+                                            "person's size", minimum=0.0)
+    """Not while others hide part of the person and the depth agrees (several people)."""
     lost_depth_agreement: float = setting(0.4, "lost when fewer than this share of the model's pixels agree with "
                                                "the depth", minimum=0.0, maximum=1.0)
 

@@ -143,6 +143,6 @@ def test_replay_offers_no_flags_it_would_ignore(wave_sequence, tmp_path, capsys)
         with pytest.raises(SystemExit) as exit_:
             main(["replay", str(wave_sequence), "--out", str(tmp_path / "o")] + flag)
         assert exit_.value.code == 2 and f"unrecognized arguments: {flag[0]}" in capsys.readouterr().err
-    help_text = subprocess.run([str(BIN / "swarmpose"), "serve", "--help"], capture_output=True, text=True,
+    help_text = subprocess.run([str(BIN / "swarmpose"), "serve", "--help-all"], capture_output=True, text=True,
                                timeout=60).stdout
-    assert "--loop" in help_text and "--record" in help_text        # serve keeps them
+    assert "--loop" in help_text and "--record" in help_text        # serve keeps them (--loop: advanced)

@@ -159,9 +159,16 @@ def test_settings_the_backward_pass_or_an_ensemble_cannot_serve_are_refused(sett
         TrackerConfig(**settings)
 
 
-def test_replay_and_the_frame_by_frame_tracker_refuse_it_and_name_what_to_run(wave_sequence, tmp_path, capsys):
-    assert main(["replay", str(wave_sequence), "--out", str(tmp_path), "--backward", "5", "-q"]) == 2
-    assert "swarmpose track" in capsys.readouterr().err
+def test_replay_and_the_frame_by_frame_tracker_refuse_it_and_name_what_to_run(wave_sequence, tmp_path, capsys,
+                                                                              monkeypatch):
+    with pytest.raises(SystemExit) as exit_:  # not offered as a flag
+        main(["replay", str(wave_sequence), "--out", str(tmp_path), "--backward", "5", "-q"])
+    assert exit_.value.code == 2 and "unrecognized arguments: --backward" in capsys.readouterr().err
+    monkeypatch.setenv("SWARMPOSE_BACKWARD", "5")  # asked for another way
+    assert main(["replay", str(wave_sequence), "--out", str(tmp_path), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "backward = 5: not in serve and replay" in err and "swarmpose track" in err
+    monkeypatch.delenv("SWARMPOSE_BACKWARD")
     source = open_source(f"folder:{wave_sequence}")
     with swarmpose.Tracker("builtin", "simulated", source=source, backward=5) as tracker:
         with pytest.raises(ConfigError, match="swarmpose.track"):

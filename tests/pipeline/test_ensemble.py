@@ -123,8 +123,11 @@ def test_with_several_people_each_keeps_the_first_tracks_id(two_people):
 
 
 def test_replay_refuses_it_and_names_what_to_run(wave_sequence, tmp_path, capsys):
-    assert main(["replay", str(wave_sequence), "--out", str(tmp_path), "--ensemble", "2", "-q"]) == 2
-    assert "swarmpose track" in capsys.readouterr().err
+    config = tmp_path / "ensemble.toml"
+    config.write_text("[tracker]\nensemble = 2\n")
+    assert main(["replay", str(wave_sequence), "--out", str(tmp_path), "--config", str(config), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "ensemble = 2: not in serve and replay" in err and "swarmpose track" in err
 
 
 def test_an_ensemble_of_one_is_refused():
