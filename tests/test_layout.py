@@ -19,7 +19,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 REPO = Path(__file__).resolve().parents[1]
-SERVICE = REPO / "service"
+SERVICE = REPO / "service" / "swarmpose"
 MAX_LINES = 420
 
 

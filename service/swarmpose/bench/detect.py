@@ -43,7 +43,7 @@ def find_assets(assets: str | Path | None = None) -> Path:
     candidates = [Path(assets).expanduser()] if assets else [
         *([Path(os.environ["SWARMPOSE_ASSETS"])] if os.environ.get("SWARMPOSE_ASSETS") else []),
         Path.cwd().parent / "shared" / "assets",
-        Path(__file__).resolve().parents[2] / "shared" / "assets",
+        Path(__file__).resolve().parents[3] / "shared" / "assets",
     ]
     for path in candidates:
         if (path / COCO_PHOTO).is_file():
