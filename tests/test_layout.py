@@ -34,7 +34,7 @@ def test_pyproject_ships_every_package():
 
 def test_the_readme_map_matches_the_tree_and_the_tests_mirror_it():
     readme = (REPO / "README.md").read_text()
-    block = readme.split("## Layout", 1)[1].split("```", 2)[1]
+    block = readme.split("## Where things are", 1)[1].split("```", 2)[1]
     mapped = set(re.findall(r"^  ([a-z_]+)/", block, flags=re.M))
     assert mapped == stages()
     test_dirs = {p.name for p in (REPO / "tests").iterdir() if p.is_dir() and not p.name.startswith((".", "_"))}
