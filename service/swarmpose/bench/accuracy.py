@@ -17,9 +17,8 @@ Each (cell, mode) is one JSON file in ``OUT/results/``, written when it is done:
 interrupted run resumes where it stopped. :func:`run_matrix` returns every record.
 
 With ``seeds`` > 1 every (cell, mode) is tracked once per tracker seed (0, 1, ...; seed 0's
-file keeps its name, seed s's ends in ``-seed{s}``): a cell's Δ moved by up to 90 mm between two
-seeds of the same code (BENCHMARKS.md, issue 12, fourth part), so a per-cell goal is judged on
-the mean over seeds (:func:`mean_over_seeds`).
+file keeps its name, seed s's ends in ``-seed{s}``): a single cell's Δ varies widely with the
+seed, so a per-cell goal is judged on the mean over seeds (:func:`mean_over_seeds`).
 """
 
 from __future__ import annotations

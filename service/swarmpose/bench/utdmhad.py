@@ -24,8 +24,7 @@ begin seated).
 
 With ``seeds`` > 1 every (sequence, variant) is tracked once per PSO seed (0, 1, ...; seed 0's
 files keep their names, seed s's end in ``-seed{s}``, and its record and settings carry
-``seed``): the matrix's mean moved by about ±2.5 mm with the pair of seeds and a change of the
-search moves single sequences by 10 mm (BENCHMARKS.md, issue 12, eleventh part). The table and
+``seed``), since a single sequence's Δ varies with the seed. The table and
 summary average over every record of a variant; the per-joint offsets of a subject are learnt
 on the other subjects' records of all seeds.
 

@@ -45,7 +45,7 @@ class ShapeSpace(ABC):
     upper: np.ndarray
     own_pose_stage: bool = False
     """Whether a fit ends with the own-pose search (:mod:`~swarmpose.tracking.own_pose_search`): only
-    where its steps, shares of each parameter's range, were measured."""
+    where its steps, shares of each parameter's range, are tuned for this space."""
 
     def __init__(self, triangles: int = 1500):
         self.triangles = int(triangles)
@@ -133,7 +133,7 @@ class MakeHumanSpace(ShapeSpace):
     """The MakeHuman body over its macro sliders (gender, caucasian, muscle, weight, height)."""
 
     kind = "makehuman"
-    own_pose_stage = True  # BENCHMARKS.md, personalisation eleventh part
+    own_pose_stage = True  # its own-pose steps are tuned for these macro sliders
 
     def __init__(self, directory: str | Path, triangles: int = 1500):
         from swarmpose.body.makehuman_macros import MACRO_NAMES, MacroShape

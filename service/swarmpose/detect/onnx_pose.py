@@ -32,7 +32,7 @@ Where a network would see the whole frame (no box, nothing to follow), it runs t
 keypoints it found there (score > ``REFINE_MIN_SCORE``), keeping the pass with the higher
 mean keypoint score. A person who fills a fifth of a
 640x480 frame covers ~40 of MoveNet's 192 input pixels in the first pass and most of them in
-the second, which is where its keypoints become usable (see BENCHMARKS.md, issue 12). The
+the second, which is where its keypoints become usable. The
 second pass costs one inference, on the first frame and after a loss only.
 
 Keypoints come back in frame pixels (the centre of the top-left pixel at (0, 0)).

@@ -65,9 +65,9 @@ def pin_pocl_threads() -> bool:
     """Ask PoCL's CPU driver to pin its worker threads (``POCL_AFFINITY=1``: thread i on CPU i)
     unless the environment already says; only where this process may run on every CPU
     0..N-1, as PoCL aborts when a pinning is refused (a container limited to other CPUs).
-    Unpinned, the kernel ran at half speed for a while after a process started: 6 of 80
-    windows of 40 launches, pinned none of 80 (``scripts/pocl_pinning.py``, BENCHMARKS.md,
-    issue 13). PoCL reads it when it starts, at the first platform query.
+    Unpinned, the kernel can run at half speed for a while after a process starts
+    (``scripts/pocl_pinning.py`` measures it). PoCL reads it when it starts, at the first
+    platform query.
     Returns whether it is set to pin."""
     if "POCL_AFFINITY" not in os.environ:
         try:

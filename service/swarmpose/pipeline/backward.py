@@ -2,9 +2,8 @@
 
 A track is worst at its start: the first frame's fit rests on one detection, and in a side view the
 limbs the depth cannot place settle only over the following frames, as the motion shows them
-(the hop, the jumps and turns and the dance seen from the side: 100-220 mm at the start, 35-50 mm
-twenty frames later; BENCHMARKS.md, issue 12, fifteenth part). A recording can be tracked in both
-directions. So, every ``window`` frames, each person's track is run backwards over those frames,
+(most of all in side views of fast motion: hops, jumps, turns, dance). A recording can be
+tracked in both directions. So, every ``window`` frames, each person's track is run backwards over those frames,
 starting from the last frame's solution, and each of those frames gets the backward fit where it
 found the person. The backward tracker is a plain :class:`~swarmpose.tracking.body_tracker.BodyTracker`
 with the forward tracker's settings and its body as it is at the window's end (a fitted height or

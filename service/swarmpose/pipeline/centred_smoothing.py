@@ -9,10 +9,9 @@ fitted, with Gaussian weights (σ = ``sigma_s``) times the joint's confidence in
 mean where the trajectory goes on at both sides, and no lag at its ends. The
 published pose is then fitted to those positions (:func:`~swarmpose.body.joint_fit.fit_pose_to_points`,
 from the poses' own line fit), so the skeleton keeps the body's bone lengths and the pose, the joints
-and a BVH agree. (Averaging the pose vectors alone was tried first: an arm whose found angles swing
-between two ways of reaching about the same place averages to neither; on the 3-person crossing the
-female walker's error went 81.7 → 79.8 mm that way, 70.0 with the joints smoothed and 72.9 with the
-pose fitted to them. BENCHMARKS.md.) A person's trajectory is cut, and nothing is averaged across
+and a BVH agree. (Joints rather than pose vectors are averaged because an arm whose found angles
+swing between two ways of reaching about the same place averages to neither.) A person's trajectory
+is cut, and nothing is averaged across
 the cut, where the person is lost or missing, where a track (re)starts (state ``init``), where
 the root turns by more than :data:`BREAK_TURN_DEG` in one frame (a corrected facing, not motion)
 and where the person's body changes (an automatic height or a ``--personalize`` shape locked).
@@ -50,9 +49,8 @@ SIGMA_SPAN = 3.0
 """A pose is averaged with the poses within this many σ of it in time."""
 CONFIDENCE_FLOOR = 0.05
 """Each joint's line fit weighs a frame by the Gaussian times (the joint's confidence there + this): a
-joint the detector and the depth agreed on counts more than one they did not (the 3-person crossing's
-found runs re-smoothed: per-person Δ 54.4 / 66.8 / 34.6 → 52.6 / 64.5 / 32.8 mm, BENCHMARKS.md), and a
-joint with no confidence anywhere in the window is still smoothed."""
+joint the detector and the depth agreed on counts more than one they did not, and a joint with no
+confidence anywhere in the window is still smoothed."""
 BREAK_TURN_DEG = math.degrees(1.0)
 """A root rotation between two consecutive frames larger than this (degrees: 1 rad) cuts the trajectory."""
 

@@ -9,9 +9,8 @@ detector feedback, people, ids and bodies, and publishes the first one's people 
 the mean of where the ``N`` tracks put it, each weighed by that track's confidence in the joint
 (plus :data:`~swarmpose.pipeline.centred_smoothing.CONFIDENCE_FLOOR`); the pose is then fitted to
 those joints (:func:`~swarmpose.pipeline.pose_to_joints.body_at_joints`, from the first track's
-pose), so the skeleton keeps the body's bone lengths. Why a mean and not the lowest objective: on
-the 3-person crossing the objective picked the wrong one of the tracks about as often as the right
-one (BENCHMARKS.md, several people, ninth part).
+pose), so the skeleton keeps the body's bone lengths. A mean rather than the track with the
+lowest objective, because the objective does not reliably tell the right track from a wrong one.
 
 The first pipeline decides who is there: the other tracks' bodies are assigned one to one to its
 people by the least total mean joint distance (scipy's ``linear_sum_assignment``; a pair farther

@@ -38,8 +38,8 @@ from swarmpose.sources.base import Frame, exc_message
 UNREACHABLE = "Unable to connect"
 RECONNECT = {"period_init_ms": 200, "period_max_ms": 1000, "period_increase_factor": 2}
 """How often zenoh tries a lost ``--connect`` endpoint again (a restarted router), unless the
-zenoh file says: zenoh's own default backs off to 4 s between tries, which made frames come
-back 1.5 to 2.2 s after a router restart (scripts/router_restart.py, BENCHMARKS.md)."""
+zenoh file says: zenoh's own default backs off to 4 s between tries, which delays frames
+by seconds after a router restart (``scripts/router_restart.py`` measures it)."""
 ANSWER_GRACE_S = 2.0
 """Seconds :meth:`ZenohSink.close` waits for info queries being answered."""
 

@@ -1,9 +1,8 @@
 """Clothes for the synthetic renders (``swarmpose synth --clothes``): a colour per body part.
 
 A body rendered in one colour shows an arm held over its torso by shading alone, where real
-people's sleeves, skin and trousers draw the limb's outline. Dressed, the 3-person crossing did
-not come out better for MoveNet (BENCHMARKS.md, several people, sixth part), so the plain render
-stays the default and every benchmark's; the option is for other RGB networks. Each triangle
+people's sleeves, skin and trousers draw the limb's outline. Clothes did not help MoveNet, so the
+plain render stays the default and every benchmark's; the option is for other RGB networks. Each triangle
 of a body takes the colour of the garment over the part that moves it (the bone with the largest
 skinning weight at most of its vertices, up the bone tree to the first bone a tracking joint drives):
 

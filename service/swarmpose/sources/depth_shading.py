@@ -4,7 +4,7 @@
 pixel's normal (from the back-projected point map's neighbours) is shaded by a light at the
 camera, tilted up and to the left so that limbs in front of the torso stand out by their
 edges; pixels without depth stay black. RGB networks trained on photos (MoveNet, BlazePose)
-find people in such images (see BENCHMARKS.md, UTD-MHAD).
+find people in such images.
 """
 
 from __future__ import annotations

@@ -1,22 +1,19 @@
 """UTD-MHAD's skeleton and depth are not paired in time: the depth frame ``t`` shows the person
 where the skeleton of frame ``t − 1.75`` puts them.
 
-Measured on the data alone, without the tracker (:func:`depth_agreement_mm`): for each trial
-lag L, the skeleton at ``t − L`` (linear interpolation between frames) is projected into
-depth frame ``t`` and its moving joints (wrists, hands, elbows, knees, ankles) and head are
-compared with the depth under them. Over the 81 sequences of subjects s1-s3
-(``scripts/utdmhad_lag.py``) the mean disagreement (each pixel's |depth − joint z| capped at
-0.5 m) is least at L = 1.75 frames for every subject: 59.7 mm against 67.9 mm with the files'
-own pairing (s1 64.9 / 73.4, s2 59.3 / 66.0, s3 54.9 / 64.3 mm), with a single minimum in the
-curve from −1 to 4 frames. About 58 ms: at 2 m/s a fist is 12 cm from where the skeleton of
-the same index says.
+The lag is found from the data alone, without the tracker (:func:`depth_agreement_mm`,
+``scripts/utdmhad_lag.py``): for each trial lag L, the skeleton at ``t − L`` (linear
+interpolation between frames) is projected into depth frame ``t`` and its moving joints
+(wrists, hands, elbows, knees, ankles) and head are compared with the depth under them; the
+mean disagreement (each pixel's |depth − joint z| capped at :data:`CAP_M`) is least at
+L = 1.75 frames. About 58 ms: at 2 m/s a fist is 12 cm from where the skeleton of the same
+index says.
 
 So :class:`~swarmpose.sources.utdmhad.UtdMhadSource` compares depth frame ``t`` with the
 skeleton at ``t − DEPTH_LAG_FRAMES`` (:func:`synchronised`), for the ground truth and for the
 simulated detector's keypoints alike (a detector run on the depth sees the person of the
 depth's time). ``utdmhad:FILE?lag=0`` keeps the files' pairing. Why the files pair them so is
-not known (the dataset's recording tool is not described); the measure above and a tracker fed
-by a network on the depth alone (BENCHMARKS.md, issue 12, ninth part) both find it.
+not known (the dataset's recording tool is not described).
 """
 
 from __future__ import annotations
@@ -42,8 +39,7 @@ CAP_M = 0.5
 """A joint's disagreement counts at most this much (m): one that lands on another part of the
 person far behind or in front of it. A joint that lands on no depth (off the person: the
 background is removed) is left out, so each lag is averaged over the joints that land on the
-person; that count peaks at the same lag (boxing s1: 721 / 740 / 762 / 767 / 751 / 724 of 792
-at lags −1 / 0 / 1 / 1.75 / 2.5 / 4)."""
+person; that count peaks at the same lag."""
 
 
 def check_lag(lag_frames: float, where: str) -> float:

@@ -2,16 +2,15 @@
 
 The per-frame search explores ±0.25-1.2 rad around the last solution, so an arm the track holds
 far from the person's is found again only if the detector's keypoints pull it there. Where they
-do not (BENCHMARKS.md, issue 12, tenth part):
+do not:
 
-* seen from the side with the arms held out (the matrix's hop at 90°), the near arm points at
-  the camera; MoveNet scores its elbow and wrist 0.1-0.3, below ``min_score``, the depth shows
-  forearm and hand 30-60 cm in front of the chest, and the track held both arms raised forward
-  in the image plane (wrist errors 600-800 mm) while the true pose scored better on the
-  objective every frame;
+* seen from the side with the arms held out, the near arm points at the camera; the detector
+  scores its elbow and wrist below ``min_score``, the depth shows forearm and hand in front of
+  the chest, and the track can hold the arm raised in the image plane although the true pose
+  scores better on the objective;
 * the far arm of that view is hidden behind the torso: nothing observed places it;
-* real Kinect punches: the fist goes forward 20-30 cm between two frames, and the track's
-  wrist trailed it along the line of sight.
+* in a fast punch the fist moves farther between two frames than the search reaches, and the
+  track's wrist trails it along the line of sight.
 
 So every frame, with the last solution posed:
 

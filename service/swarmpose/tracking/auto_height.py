@@ -1,8 +1,7 @@
 """Automatic height: a body whose shape the user did not give is scaled to the person's stature.
 
-The default bodies are 1.75 m tall; people are not. On UTD-MHAD's real Kinect depth the default
-built-in body tracks the 1.50-1.63 m subjects 15-25 mm worse than the same body at their height
-(BENCHMARKS.md, issue 12). Personalisation (``--personalize N``) fits the whole shape but costs
+The default bodies are 1.75 m tall; people are not, and a body of the wrong height tracks them
+worse. Personalisation (``--personalize N``) fits the whole shape but costs
 tens of seconds; this is its cheap first step, on by default (``auto_height``).
 
 **The measure** (:mod:`swarmpose.tracking.stature`, whose functions and constants this paragraph
@@ -18,12 +17,9 @@ below the fitted knees near the lines through the ankles. The fitted model only 
 its size does not enter the measure. A hand on the head, or a head or feet cut off by the image's
 border, give no measure.
 
-*Design change:* the first version compared the person's extent with the fitted model's own
-render, measured the same way, so that the percentiles and the posture would cancel. They do
-for the true pose (within 0.5 %), but the tracker's fits absorb a wrong size (a body too tall
-sinks its feet below the floor the depth cannot see there, bends, leans): the 1.75 m body fitted
-to a 1.75 m subject measured 1.68 m, a 1.55 m subject's wave 1.70 m. The head above the floor is
-the observation's alone (four built-in subjects of 1.55-1.95 m: within 0.4 cm).
+The head above the floor is the observation's alone, rather than a comparison with the fitted
+model's own render, because the tracker's fits absorb a wrong size (a body too tall sinks its feet
+below the floor the depth cannot see there, bends, leans).
 
 **The person's points** (:func:`person_mask`): the observed pixels inside the model's silhouette
 grown by :data:`GROW_DOWN_UP` of its pixel height up and down and :data:`GROW_SIDEWAYS` sideways
@@ -39,7 +35,7 @@ locked. The factor is clamped to :data:`FACTOR_LIMITS`. A person who never stand
 the given body; a new person starts from the given body again.
 
 Limits: a person jumping (jumping jacks) is measured in the air as well; MakeHuman subjects
-came out up to 2 % short (the top of their heads against their stature differs from the
+come out up to about 2 % short (the top of their heads against their stature differs from the
 built-in body's, on which :data:`UPRIGHT_SHARE` is calibrated); a single-person tracker
 (``--max-people 1``) cannot tell another person from a lost track, so the height stays the first
 person's (:meth:`HeightFittingTracker.new_person` starts again; several people's trackers call

@@ -35,7 +35,7 @@ class TrackerConfig:
     triangles: int = setting(1500, "tracking level of detail of the body mesh, triangles", minimum=100)
     coarse_share: float = setting(0.0, "share of each PSO's generations scored at the coarse tile and triangles "
                                        "(0 = off)", minimum=0.0, maximum=1.0)
-    """Every schedule measured cost accuracy (BENCHMARKS.md, issue 13), so it is off."""
+    """Off by default: scoring generations on the coarse tile and mesh costs accuracy."""
     coarse_tile: tuple[int, int] = setting((32, 32), "depth tile WxH pixels of the coarse generations", kind="size")
     coarse_triangles: int = setting(500, "level of detail of the body mesh in the coarse generations, triangles",
                                     minimum=100)
@@ -74,7 +74,7 @@ class TrackerConfig:
                           minimum=0)
     """They take the best pose's root, spine, neck and legs further down the same objective (on a
     young track the best of each facing, before they compete); the arms stay the search's. Off:
-    about a sixth more tracked frames/s (BENCHMARKS.md)."""
+    faster, without that refinement."""
     backward: int = setting(0, "offline: every N frames refit each track backwards over them, published N frames "
                                "late (0 = off)", minimum=0)
     """A track's start and a side view's limbs settle over frames, which the backward pass starts

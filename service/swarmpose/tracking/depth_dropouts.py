@@ -3,9 +3,7 @@
 A Kinect-like sensor drops many pixels along a depth edge (the simulator: 60 % of the pixels
 whose 3 × 3 neighbourhood spans more than 5 cm, on both sides of the edge). The shape fit charges
 a model pixel with no observation as if nothing were there (E_S, :mod:`~swarmpose.tracking.personalise`),
-so every dropout on the person's outline pulled the fitted body in: with the true poses held, a
-slim male came out 6-7 % small on noisy depth and 1 % small on the same depth without the edge
-dropouts (BENCHMARKS.md, issue 15, seventh part).
+so every dropout on the person's outline would pull the fitted body in.
 
 :func:`fill_dropouts` gives a zero pixel the median of its valid 8-neighbours where at least
 ``min_valid`` of them are valid. A dropout on the person's side of a straight outline has its

@@ -3,11 +3,9 @@
 A joint's lift J^e is the depth of the surface in front of its keypoint pushed back by the joint's
 radius (:mod:`swarmpose.tracking.lift`). For a joint that another part of the body hides (the far
 arm of a person seen from the side, behind the torso) that surface is the occluder's, and the
-symmetric 3D term pulls the joint 10-25 cm towards the camera (BENCHMARKS.md, issue 12: the walk
-seen from the side with MoveNet, far elbow and wrist 170 and 295 mm off, 10-25 cm in front).
-One-sided 3D distances were measured before and cost the front views: there the previous
-solution alone decided which joints were hidden, and a track that wrongly held an arm behind the
-torso kept it there. Here a lift leaves the 3D term only when two tests agree:
+symmetric 3D term pulls the joint towards the camera, by as much as the occluder is thick. Were
+the previous solution alone to decide which joints are hidden, a track that wrongly held an arm
+behind the torso would keep it there, so a lift leaves the 3D term only when two tests agree:
 
 1. **the previous solution hides the joint**: along the camera ray through the joint, the body's
    own surface lies more than :data:`HIDDEN_M` in front of it (a visible limb joint lies its

@@ -5,8 +5,7 @@ The depth flips (:mod:`swarmpose.tracking.limb_flips`) and arm proposals
 rest of it, a frame old. Joined to the swarm as single particles, such a hypothesis scores worse
 than the continued track even where its limb is the right one, because the track's particles
 have refined the rest of the pose to this frame and the hypothesis has not; the swarm's best
-pulls it over at once. On the dance seen from the side with MoveNet the true far arm was
-proposed within 57-73 mm and lost every frame that way (BENCHMARKS.md, issue 12, eleventh part).
+pulls it over at once, so a right proposal is lost.
 
 So the best :attr:`TrackerConfig.hypotheses` of them by the objective each start a sub-swarm of
 :data:`GROUP_SHARE` of the particles (at least 2), spread around it at half the track's search

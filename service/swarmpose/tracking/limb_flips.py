@@ -4,9 +4,8 @@ One depth camera and a 2D detector leave a limb's depth ambiguous wherever the d
 hardly sees it: an upper arm pointing at the camera and one pointing away project to the
 same pixels, and so do a forearm folded towards the camera and one folded away. Once the
 track has one of the two, the other is a whole limb's swing away, and the per-frame search
-(±0.25-1.2 rad around the last solution) rarely crosses it; on real Kinect squats the
-tracked wrists sat 20-30 cm behind the true ones along the line of sight, 2-5 cm off in the
-image (BENCHMARKS.md, issue 12, sixth part).
+(±0.25-1.2 rad around the last solution) rarely crosses it: a wrist can then sit well behind
+or in front of the true one along the line of sight while its image fits.
 
 So every frame, each limb (arm: shoulder → elbow → wrist; leg: hip → knee → ankle) of the
 previous solution is flipped in depth, as the kinematic jump sampling of monocular trackers
@@ -15,7 +14,7 @@ camera ray at the same distance from the pivot (the mirror of the bone through t
 across the line of sight), the end joint then to either point of its own ray at its bone's
 length from the new middle joint; or the end joint alone flips around the middle one. Each
 flipped limb's angles are solved by a few damped Gauss-Newton steps (numpy forward
-kinematics, all candidates in one batch; about 10 ms a frame on 2 cores, shins below the
+kinematics, all candidates in one batch, cheap next to the search; shins below the
 camera included: they lean out of the plane across their rays, but their mirror would bend the
 knee forwards, so they are solved and dropped), and a candidate that reaches its joints within :data:`MAX_MISS_M` joins
 the frame's swarm as a particle. The objective decides: a flip that explains the depth

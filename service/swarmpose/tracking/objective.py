@@ -1,8 +1,7 @@
 """The paper's objective ``E = w_D·E_D + w_J·E_J`` (§2.3), plus our ``w_P·E_P``, evaluated for
 all particles at once.
 
-Units (chosen so that the paper's balance w_D = 3, w_J = 1, α = 0.97 works; see the w_D
-sweep in BENCHMARKS.md):
+Units (chosen so that the paper's balance w_D = 3, w_J = 1, α = 0.97 works):
 
 * ``E_D = (1/N_P) Σ_{p∈B} min(|d^h_p − d^o_p|, T)`` in **centimetres**: the OpenCL scorer's
   per-particle sum over the observed pixels of the tile over B (invalid depth ignored,
@@ -15,10 +14,9 @@ sweep in BENCHMARKS.md):
   J^e, with w = 0.2 for hips, 1.8 for wrists and ankles, 1 otherwise; joints missing from
   the detection, below ``min_score`` or without depth drop out of their term.
   The lift of an occluded joint is the occluder's surface (the far arm of a person seen from
-  the side lifts onto the torso, 20-30 cm in front of the arm); a one-sided 3D distance
-  (free behind the lift) for every joint, or for the joints the previous solution hides,
-  was measured and not kept: it made front views worse (BENCHMARKS.md, issue 12). What is
-  kept (``hidden_lifts``, :mod:`swarmpose.tracking.hidden_lifts`): a limb joint's lift leaves
+  the side lifts onto the torso, in front of the arm). The 3D distance stays symmetric, since a
+  one-sided one (free behind the lift) would let a track hold a visible arm behind the torso;
+  instead (``hidden_lifts``, :mod:`swarmpose.tracking.hidden_lifts`) a limb joint's lift leaves
   the 3D term when the previous solution hides the joint *and* the depth at its keypoint shows
   that solution's occluder, so a track that wrongly holds a visible arm behind the torso keeps
   the lift that pulls it out.
@@ -32,13 +30,12 @@ sweep in BENCHMARKS.md):
   angles, weight w_A (``arm_prior`` setting; 0 = off, the default) times how side on the
   reference pose stands (:func:`side_on_share`: 0 facing the camera or turned
   away, 1 side on). Seen from the side, an arm that hangs over the torso or points at the
-  camera is missed by the detector and hardly shows in the depth tile, and the search left
+  camera is missed by the detector and hardly shows in the depth tile, and the search leaves
   it raised or swung out where nothing contradicts it; a weak pull to the rest pose puts it
-  where an unobserved arm usually is. Unscaled, the pull helped the side views and cost the
-  views from behind (a facing decision tipped) and real arm motions; scaled, the matrix and
-  UTD-MHAD gained, but as the default it failed the regression subset's side walk (p = g = 32)
-  and a real upper body close below the camera (whose tilted line of sight reads as partly
-  side on), so it is opt-in (BENCHMARKS.md, issue 12, fifth part).
+  where an unobserved arm usually is. It is scaled by the side-on share so that views from
+  behind and real arm motions keep their freedom, and it is opt-in because it can still pull
+  a real arm away (a real upper body close below the camera, whose tilted line of sight reads
+  as partly side on, for one).
 * Left/right label swaps of the detector (common on people seen from behind or the side):
   with ``label_swaps``, each detected left/right pair (shoulders, elbows, ..., ears) is
   matched to the model's pair in the better of the two assignments, the crossed one at a
@@ -87,9 +84,9 @@ on an adult): only arms clearly inside the trunk pay."""
 
 def side_on_share(pose: np.ndarray) -> float:
     """|sin| of the angle between the body's forward axis and the line of sight to its root
-    for a pose (36,): 0 facing the camera or turned away, 1 side on (E_A's scale). The
-    measured form: a line of sight tilted up or down counts too (a person close below the
-    camera reads as partly side on); a turn-only variant measured worse (BENCHMARKS.md)."""
+    for a pose (36,): 0 facing the camera or turned away, 1 side on (E_A's scale). A line of
+    sight tilted up or down counts too (a person close below the camera reads as partly side
+    on), not only the body's turn about the vertical."""
     h = np.asarray(pose, float)
     sight = h[:3] / max(float(np.linalg.norm(h[:3])), 1e-9)
     cos = float(quaternion_to_matrix(h[3:7])[:, 2] @ sight)
@@ -320,7 +317,7 @@ class Objective:
 
         Depth sees only the near side of a body and the detector's far-side joints are
         guesses, so nothing in E_D or E_J stops an occluded arm from sinking into the trunk
-        (a side view put the far arm 20-30 cm off, inside the torso); this term does."""
+        (in a side view the far arm can settle well inside the torso); this term does."""
         pts = points[:, self._penetration_points]
         arms, hip, shoulder = pts[:, :4], pts[:, 4:6].mean(axis=1), pts[:, 6:8].mean(axis=1)
         axis = shoulder - hip

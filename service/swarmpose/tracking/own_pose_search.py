@@ -1,11 +1,9 @@
 """The shape fit's last stage: candidate shapes judged with poses of their own.
 
 :func:`~swarmpose.tracking.personalise.fit_shape` alternates a shape step with the key frames'
-poses held and a pose step, and poses fitted with one shape favour shapes like it: with the true
-poses held, the four subjects the fit missed by 6-10 % of volume came out within 1.6 %, but the
-alternation, started from poses tracked with the start body, settles near where it started
-(BENCHMARKS.md, personalisation eighth part). With every key frame's pose polished anew for each
-body, the true shape scored below the fitted one on those subjects (ninth part). This stage does
+poses held and a pose step, and poses fitted with one shape favour shapes like it: the
+alternation, started from poses tracked with the start body, settles near where it started. With
+every key frame's pose polished anew for each body, a truer shape scores lower. This stage does
 that judgement during the fit: each candidate shape gets its own poses.
 
 A candidate's energy (:func:`own_pose_energy`): every key frame's pose, from where the
@@ -14,7 +12,8 @@ alternation left it, is moved to the candidate's best root offset
 with the candidate's body (:func:`~swarmpose.tracking.pose_polish.polish_pose`, every
 coordinate); the energy is the mean of the polished values plus the stature term E_H. The bone
 term E_B is left out: its lengths are corrected by the lift's bias on the shape being judged, which
-costs 1.5-2 s a shape (:mod:`~swarmpose.tracking.personalise`), more than the judgement itself. The polish
+costs a render and a lift per shape (:mod:`~swarmpose.tracking.personalise`), more than the judgement
+itself. The polish
 of key frame i draws the same random numbers for every candidate (common random numbers), so the
 energy is a deterministic function of the shape: two candidates differ by their shapes, not by
 the luck of their polish.
@@ -24,17 +23,15 @@ The search (:func:`compass_search`): from the alternation's result, each paramet
 taken, the step halved when none improves, until the step falls below ``min_step`` (at
 :data:`FIRST_STEP` and :data:`LEAST_STEP`: steps of 0.15 and 0.075 only) or the budget is spent (the
 round that reaches it finishes: up to 2D - 1 more, D the parameters). Only MakeHuman's space gets
-the stage (:func:`~swarmpose.tracking.personalise.fit_shape`): the built-in body's ranges (a first
-step of 9 cm of stature) were not measured. Each judgement costs a polish of
-every key frame (about a second for 12 frames at 60 rounds on the 2-core VM), so the budget is
-tens of candidates, which rules out a population method; scipy's bounded local methods (Powell,
-Nelder-Mead) start with a line search or a simplex of one candidate per dimension and do not
-take a budget of whole candidates with a fixed step pattern, which is what was measured.
+the stage (:attr:`~swarmpose.body.shape_space.ShapeSpace.own_pose_stage`): the steps are tuned for
+its sliders, and on the built-in body a first step would be 9 cm of stature. Each judgement costs a
+polish of every key frame, so the budget is tens of candidates, which rules out a population
+method; scipy's bounded local methods (Powell, Nelder-Mead) start with a line search or a simplex
+of one candidate per dimension and do not take a budget of whole candidates with a fixed step
+pattern.
 
-Measured (BENCHMARKS.md, personalisation eleventh part): on the 17 synthetic subjects at two seeds
-the volume within 5 % on 16 and 14 (15 and 14 without the stage), the height within 2 cm on all.
-The judgement resolves a few tenths in about 350: a larger search (100 rounds, 80 candidates) found
-shapes of lower energy that were not truer ones, so the budget stays small.
+The budget stays small because the judgement resolves the energy only to about one part in a
+thousand: a larger search finds shapes of lower energy that are not truer ones.
 """
 
 from __future__ import annotations

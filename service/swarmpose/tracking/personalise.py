@@ -6,9 +6,7 @@ shape space's start body). :func:`fit_shape` chooses ``keyframes`` well-spread f
 0. **Sweep.** A coarse grid (:data:`~swarmpose.tracking.fit_settings.SWEEP`: gender × height) of
    shapes, each with its own pose step, picks the start: poses tracked with the start body favour
    shapes like it. Its heights
-   are fixed, so E_H favours the candidate nearest the measured stature whatever its build
-   (female-short started male); candidates moved to the stature instead fixed that subject and
-   no count (BENCHMARKS.md, personalisation eighth part).
+   are fixed, so E_H favours the candidate nearest the measured stature whatever its build.
 1. **Shape step.** A PSO over the space's parameters (:class:`~swarmpose.body.shape_space.ShapeSpace`)
    with the poses held, minimising the mean over the key frames of ``E + w_D·E_S`` (the
    tracker's objective E with its own weights, penetration term included, plus the silhouette
@@ -27,8 +25,8 @@ shape space's start body). :func:`fit_shape` chooses ``keyframes`` well-spread f
 
 E_S, the silhouette term: the depth term charges an observed pixel the model misses (T) but not a
 model pixel where nothing is seen, or where the sensor sees farther than T behind the model: a
-wall behind the person costs T whether the model covers it or not. So a body could grow for free
-(with the true poses held on noise-free depth a slim male came out 16 % too large). E_S charges T
+wall behind the person costs T whether the model covers it or not. So a body could grow for free.
+E_S charges T
 for every rendered pixel of the tile that no observation within T confirms (rendered less
 ``close``, normalised like E_D, cm; :meth:`~swarmpose.tracking.objective.Objective.silhouette_cm`,
 on at w_S = w_D). Its limit: an object in front of the person (closer than T)
@@ -36,37 +34,33 @@ is charged too, so fit from a recording where the person is in full view. The fi
 their edge dropouts filled first (:func:`~swarmpose.tracking.depth_dropouts.fill_dropouts`),
 which E_S would otherwise charge as empty space and shrink the body by (the observed bone lengths
 are lifted on the filled depth too; the pose step, the stature measure and the online collection's
-hidden share still read the frames as they are: a pose step on E + w_D·E_S and the filled depth
-measured no better, BENCHMARKS.md, personalisation eighth part).
+hidden share still read the frames as they are).
 
 E_B, the bone-length term: the poses held during a shape step were fitted with the previous
-shape, and a body too short can bend and lean to explain them (female-tall came out 5 cm short
-with E alone, though E with the true poses prefers the true shape). The distance between two
+shape, and a body too short can bend and lean to explain them. The distance between two
 lifted joints of one limb does not depend on the pose, so E_B compares each limb's observed
 length over all samples with the candidate's rest length (mean difference, cm). Noise on the
 lifted joints only lengthens a distance on average (the part across the bone adds its square),
 so the observed length is the median less that excess, estimated from the spread over frames
-(:func:`debiased_length`); on 28 walks (4 subjects × 7 noise seeds, 168 limbs) the median was
-+0.11 cm long on average, the debiased length +0.01 cm. The lift itself misplaces joints too,
-by amounts that depend on the body (a keypoint's depth is the nearest surface's, pushed back
-by a constant per joint): with noise-free 2D joints the same walks' limbs came out 1.2 % short on
-the male bodies and 1.1-1.5 % long on the female ones. So before the sweep and each round the
+(:func:`debiased_length`). The lift itself misplaces joints too, by amounts that depend on the
+body (a keypoint's depth is the nearest surface's, pushed back by a constant per joint). So
+before the sweep and each round the
 lift is run on the current shape's own noise-free render at the key frames' poses
 (:func:`~swarmpose.tracking.lift_bias.lift_bias`), and E_B's lengths are the observed ones less
 that bias: like E, E_B then compares what the sensor and the lift make of a body with what they
 made of the person. The bias is each sweep candidate's own (its genders are far apart, and the
 bias flips sign between male and female bodies), then in each round the current shape's, used
-for every candidate of that round's shape PSO (calibrating each of its 272 candidates would cost
-1.5-2 s apiece). The energies of different rounds are therefore measured against different E_B
-targets.
+for every candidate of that round's shape PSO (calibrating each candidate would cost a render
+and a lift apiece). The energies of different rounds are therefore measured against different
+E_B targets.
 E_J's 3D term stays in the fit though the build biases it (a heavier body's joints lift farther in
-front: :data:`~swarmpose.tracking.lift.JOINT_RADIUS` is one per joint); the term left out, or its
-targets corrected like E_B's, measured no better (BENCHMARKS.md, personalisation fourth part).
+front: :data:`~swarmpose.tracking.lift.JOINT_RADIUS` is one per joint): neither leaving it out
+nor correcting its targets like E_B's helps.
 
 The bodies scored are :meth:`~swarmpose.body.shape_space.ShapeSpace.fitting_body`: for MakeHuman,
 the tracking mesh moved out to enclose the full mesh's volume, which the decimation lowers by
-2.3-2.4 %; matched to the depth as it is, the tracking mesh made the full body that much too
-large. The result's ``tracking_body`` is the plain tracking mesh, as a tracker loading the
+about 2.4 %; matched to the depth as it is, the tracking mesh would make the full body that much
+too large. The result's ``tracking_body`` is the plain tracking mesh, as a tracker loading the
 fitted body makes it.
 
 Key frames are chosen by farthest-point sampling of the tracked poses' joint angles and root
@@ -141,8 +135,7 @@ NOISE_AXES = 1.0
 """k of :func:`debiased_length`: how many axes across a bone carry the per-frame noise of the
 lifted joints with the variance seen along it. The noise of J^e is mostly the 2D keypoints' (in
 the image plane, where a walking person's limbs mostly lie: one axis across the limb); the lift's
-depth is a window median and jitters less (female and male walks, lifted against the true joints:
-1.5 cm per image axis, 0.6-2.4 cm robust spread in depth). k = 2 would be isotropic 3D noise."""
+depth is a window median and jitters less. k = 2 would be isotropic 3D noise."""
 MAX_CORRECTION = 0.1
 """The most :func:`debiased_length` takes off, as a share of the median: beyond it the noise is
 not small against the bone and the first-order correction no longer holds."""
@@ -246,7 +239,7 @@ class _KeyFrame:
 ROOT_OFFSETS_M = np.array([(u, z) for u in (-0.06, -0.03, 0.0, 0.03, 0.06) for z in (-0.03, 0.0, 0.03)])
 """(K, 2) root offsets tried per key frame and candidate shape: along the body's up axis and the
 camera's depth axis, m. A taller or shorter body moves its hips; holding the root where the start
-body had it would tie the fit to the start shape (female-tall came out 5.6 cm short)."""
+body had it would tie the fit to the start shape."""
 
 
 def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Intrinsics, config: TrackerConfig,
@@ -339,7 +332,7 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
         if progress is not None:
             progress(f"round {round_ + 1}/{settings.rounds}: energy {best.value:.2f}, "
                      + ", ".join(f"{k} {v:.3f}" for k, v in space.parameters(x).items()))
-    count = 0  # the last stage, where the space was measured with it (MakeHuman's)
+    count = 0  # the last stage, where the space's steps are tuned for it (MakeHuman's)
     if settings.own_pose_rounds > 0 and settings.own_pose_candidates > 0 and space.own_pose_stage:
         starts = [k.pose for k in keys]
         def own_pose_value(cand: np.ndarray) -> float:  # E + w_D·E_S at poses of its own, and E_H (no E_B)

@@ -1,28 +1,22 @@
 """A local polish of one pose on one frame's objective: a batched (1+λ) evolution strategy.
 
 The tracker's per-frame search (a PSO spread around the previous pose at its frame budget) stops
-short of the frame's minimum: on the personalisation bench's neutral walk, tracked at p = g = 32
-with the subject's own body, 12 frames' tracked poses scored 10-23 above the true poses on the
-shape fit's objective, their joints 43-59 mm off; 60 rounds of this polish took the first six of
-them to 3-6 above, 23-35 mm off (BENCHMARKS.md, several people, third part). Each round moves a random
-quarter of the movable coordinates of λ copies of the current pose by Gaussian steps (root
-translation m, root quaternion and joint angles rad), keeps the best copy if it beats the current
-pose, and widens the steps after a success and narrows them after a failure. Poses stay within
+short of the frame's minimum; this polish takes the pose further down the same objective. Each
+round moves a random quarter of the movable coordinates of λ copies of the current pose by
+Gaussian steps (root translation m, root quaternion and joint angles rad), keeps the best copy if
+it beats the current pose, and widens the steps after a success and narrows them after a failure. Poses stay within
 the angle limits, quaternions unit length; the result is never worse than the start.
 
-The tracker (``polish`` setting) moves everything but the arms (:data:`WITHOUT_ARMS`): polished
-too, a side-on arm followed the detector's wrong keypoints more closely (the 3-person crossing's
-female walker 79.7 → 86.8 mm over three seeds, against 73.5 mm with the arms left to the search).
+The tracker (``polish`` setting) moves everything but the arms (:data:`WITHOUT_ARMS`): a polished
+side-on arm follows the detector's wrong keypoints more closely.
 On a young track's frames (ages 1-4, while the start's facings are re-checked) it polishes the best
 particle of each facing the swarm holds (:func:`polish_facings`: the track's, and a turned one that a
-re-check brought) before they compete. Polished only the winner, the track met the re-checks' other
-facing unpolished: a track started mirrored on a person seen from behind sat too deep for them to
-replace it (the regression subset's jumping jacks from behind locked at 2 of 4 seeds, 325 mm; with
-the young duel none of 4 did). On a settled track it polishes the chosen pose only
-(:func:`polish_solution`): a duel on every frame let a later re-check's mirrored facing, polished,
-flip a settled track (BENCHMARKS.md, several people, fifth part).
-The shape fit's pose step runs without it (a polish of its key frames measured no better:
-BENCHMARKS.md, personalisation ninth part).
+re-check brought) before they compete, so that a track started mirrored does not sit, polished, too
+deep for an unpolished re-check to replace it. On a settled track it polishes the chosen pose only
+(:func:`polish_solution`), so that a later re-check's mirrored facing, polished, cannot flip a
+settled track.
+The shape fit's pose step runs without it; its last stage
+(:mod:`~swarmpose.tracking.own_pose_search`) polishes each candidate's key frames.
 """
 
 from __future__ import annotations
@@ -112,9 +106,8 @@ def polish_solution(objective: Callable[[np.ndarray], np.ndarray], result: PsoRe
     (:meth:`~swarmpose.tracking.body_tracker.BodyTracker._hold_facing`). duel: each facing's best
     polished before ``hold`` chooses (:func:`polish_facings`: a young track, whose start's facings
     are re-checked on equal terms); else ``hold`` chooses first and its pick is polished: a
-    settled track's polished pose meets a turned challenger with the advantage of its frames (the
-    duel on every frame let a re-check's mirrored facing, polished, win twice and flip a settled
-    track: BENCHMARKS.md, several people, fifth part)."""
+    settled track's polished pose meets a turned challenger with the advantage of its frames, so a
+    re-check's mirrored facing cannot flip a settled track by being polished too."""
     if duel and previous is not None:
         return hold(polish_facings(objective, result, previous, iterations, rng, WITHOUT_ARMS, turn_deg))
     best = result.best if previous is None else hold(result)

@@ -1,13 +1,11 @@
 """The stature term of the shape fit (:func:`swarmpose.tracking.personalise.fit_shape`): the
 person's height measured on the depth bounds the fitted body's.
 
-**Why.** The fit's own objective barely tells heights apart: across ±3 cm its energy moves by
-about 1 in 330-400, the size of a pose refit's scatter, and some builds came out 2.5-3.7 cm off
-with errors of one sign over seeds and round counts (female-slim +3.0 to +3.5 cm, male-tall +2.5
-to +3.2, a caucasian-0.5 mix -2.5 to -3.7; BENCHMARKS.md, personalisation fourth and fifth
-parts). The automatic height's measure (:func:`swarmpose.tracking.stature.person_stature`: the
-top of the head above the floor, where the fitted pose only says where to look) read all 17
-bench subjects' walks short by 0.6-1.5 % (BENCHMARKS.md, personalisation sixth part).
+**Why.** The fit's own objective barely tells heights apart (across a few cm its energy moves
+by about as much as a pose refit's scatter), so some builds come out centimetres off with errors
+of one sign. The automatic height's measure (:func:`swarmpose.tracking.stature.person_stature`:
+the top of the head above the floor, where the fitted pose only says where to look) reads a walk
+slightly short, hence the lopsided band below.
 
 **The term.** At every sample where the lifted joints stand upright on a straight knee
 (:func:`~swarmpose.tracking.stature.upright_stature` without the fitted pose's test: the samples
@@ -16,8 +14,7 @@ measured; their median
 ``H`` needs :data:`MIN_MEASURES` of them. A body whose rest height lies in :data:`BAND` around
 ``H`` costs nothing; beyond it, :data:`WEIGHT` per cm. The band is lopsided because posture only
 lowers the head: a person's head top is never above their stature but for the measure's noise
-(:data:`BAND`'s lower share), while a walk lowers it by up to about 1.2 % (MakeHuman subjects
-walking CMU 131_01 at 3 m: 0.985-0.995 of their stature; other clips and views 0.992-1.004).
+(:data:`BAND`'s lower share), while a walk lowers it by up to about 1.2 %.
 """
 
 from __future__ import annotations

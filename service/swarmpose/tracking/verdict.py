@@ -6,9 +6,8 @@
   people's pixels were removed from the depth (several people), the 2D test is not applied while
   at least :data:`HIDDEN_TRUST_SEEN` of the model's pixels are observed and
   :data:`HIDDEN_TRUST_AGREEMENT` of those agree: the detection on
-  a crop that others overlap is what is off then (the 3-person crossing's waver, 71 % visible
-  behind a walker, 91 % of his model's pixels agreeing, was judged lost on his 2D joints and not
-  found again for 18 frames: BENCHMARKS.md, several people, fifth part).
+  a crop that others overlap is what is off then, and a person partly behind another whose fit
+  the depth confirms would otherwise be judged lost and take frames to be found again.
 * **Confidence** per evaluation joint, 0..1: the mean of a 2D agreement
   ``s·exp(−½(d/σ)²)`` (s = detection score, d = model–detection distance px, σ = 4 % of the
   person's size; only where the layout detects the joint) and a depth agreement
