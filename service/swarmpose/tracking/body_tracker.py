@@ -71,14 +71,14 @@ in one frame. It replaces the track only when it wins two frames running (the fr
 publishes the best solution of the track's own facing), and then the old track's poses are
 dropped from the history (:mod:`swarmpose.tracking.history`). One frame's detection that swapped sides (people seen from
 behind) flipped tracks either way: kept as seeds, the old poses won back a mirrored facing;
-accepted at once, a mirrored re-check replaced a right track (BENCHMARKS.md, issue 12)."""
+accepted at once, a mirrored re-check replaced a right track."""
 
 
 YOUNG_RECHECKS = (1, 2, 4)
 """Track ages (frames after the start) at which the start's facings are refitted too, besides
 every ``config.recheck`` frames: the start's pick rests on one frame's detection, and a
 detector that swapped sides on that frame (people seen from behind) locked the track in the
-mirrored facing until the next re-check (BENCHMARKS.md, issue 12)."""
+mirrored facing until the next re-check."""
 
 
 def recheck_due(index: int, age: int, every: int) -> bool:
@@ -356,8 +356,8 @@ class BodyTracker:
                            else Objective(self.body, self.intrinsics, self.objective.scorer, weights,
                                           self.objective.coarse))
         start_objective.set_frame(depth, box, targets, centre)
-        # the start runs once per track, so it gets at least config.start_budget (at p = g = 32 a side view's
-        # start did not converge: 151 deg off, 215 mm; BENCHMARKS.md, issue 12); live, a start that keeps up
+        # the start runs once per track, so it gets at least config.start_budget (a smaller one left a side
+        # view's start unconverged); live, a start that keeps up
         first = generations is None
         least = start_budget(self.config.start_budget, self.budget_ms)
         budget = max(self.config.generations, least) if first else generations
