@@ -165,3 +165,29 @@ def test_track_reads_no_frame_past_frames_and_warns_when_the_source_breaks(wave_
     assert dying.status == "error: USB device disconnected"
     assert any(f"source folder:{wave_sequence} ended with an error: USB device disconnected" in r.getMessage()
                for r in caplog.records)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("settings, flags", [
+    ({"coordinates": "world", **FAST}, ["--coordinates", "world", "--particles", "16", "--generations", "12"]),
+    ({"personalize": 3, **FAST}, ["--personalize", "3", "--particles", "16", "--generations", "12"]),
+], ids=["world", "personalize"])
+def test_the_api_has_the_world_frame_and_personalisation_of_the_command_line(wave_sequence, tmp_path, settings,
+                                                                               flags):
+    """One pipeline builder for both: the same messages, in the world frame or with the body fitted online."""
+    api = [r.to_message("camera0") for r in swarmpose.track(f"folder:{wave_sequence}", detector="simulated",
+                                                             frames=5, **settings)]
+    assert main(["track", str(wave_sequence), "--out", str(tmp_path), "--frames", "5", "--no-overlay", "-q",
+                 *flags]) == 0
+    cli = [json.loads(line) for line in (tmp_path / "poses.jsonl").read_text().splitlines()]
+    assert [m["bodies"] for m in api] == [m["bodies"] for m in cli]
+    assert [m["coordinates"] for m in api] == [m["coordinates"] for m in cli]
+    if "coordinates" in settings:  # y up, the floor at y = 0: the ankles are near it
+        assert all(m["coordinates"] == "world" for m in api)
+        ankles = [m["bodies"][0]["joints"][n]["position_m"][1] for m in api for n in ("left_ankle", "right_ankle")]
+        assert 0.0 < np.median(ankles) < 0.2
+
+
+def test_personalize_needs_a_body_given_by_name():
+    with pytest.raises(ConfigError, match="give the body by name"):
+        swarmpose.Tracker(body=swarmpose.load_body("builtin"), personalize=3)

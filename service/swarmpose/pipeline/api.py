@@ -12,26 +12,23 @@ any source URI. Both run the same per-frame step as the command line.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from swarmpose.body.loader import load_body
+from swarmpose.body.shape_space import shape_space_for
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError, ShapeError
 from swarmpose.core.settings import with_settings
 from swarmpose.detect.joints import Detector
 from swarmpose.detect.registry import make_detector
-from swarmpose.pipeline.ensemble import ensemble_of
+from swarmpose.pipeline.builder import build_pipeline
 from swarmpose.pipeline.features import refuse
 from swarmpose.pipeline.run import results, source_error
-from swarmpose.pipeline.step import FramePipeline
 from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
 from swarmpose.sources.registry import open_source
-from swarmpose.tracking.auto_height import HeightFittingTracker, applies
-from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.config import TrackerConfig
 from swarmpose.tracking.result import FrameResult
 
@@ -54,7 +51,12 @@ class Tracker:
     detections of a ``swarmpose synth`` sequence). config: a
     :class:`~swarmpose.tracking.config.TrackerConfig`; settings: any of its fields by name
     (``particles=32``, ``mode="joints"``, ``tile="32x48"``), over ``config``, converted and
-    checked as flags are (ConfigError for a wrong type, NaN or a value out of range).
+    checked as flags are (ConfigError for a wrong type, NaN or a value out of range);
+    ``personalize=N`` fits each person's body on their first N tracked frames (a body given by
+    name). coordinates: ``"camera"`` or ``"world"`` (the results' messages floor-aligned: y up,
+    the floor at y = 0, the origin under the first tracked person); floor: ``"auto"`` (fitted to
+    the depth), ``"off"`` or an extrinsics JSON file (default: ``"auto"`` for world coordinates,
+    else ``"off"``). The pipeline is the command line's (:mod:`swarmpose.pipeline.builder`).
 
     The tracker feeds each frame's tracked joints back to the detector (where to look next)
     and restarts a track that fails. Use it as a context manager, or call :meth:`close`.
@@ -62,7 +64,8 @@ class Tracker:
 
     def __init__(self, body: str | SkinnedBody = "builtin", detector: str | Detector = "auto",
                  intrinsics: Intrinsics | None = None, *, shape: str | None = None,
-                 source: FrameSource | None = None, config: TrackerConfig | None = None, **settings: Any):
+                 source: FrameSource | None = None, config: TrackerConfig | None = None, coordinates: str = "camera",
+                 floor: str | None = None, **settings: Any):
         self.config = with_settings(config or TrackerConfig(), **settings)
         if isinstance(detector, str) and detector.strip() == "simulated" and source is None:
             raise ConfigError("the simulated detector draws its keypoints from a source's ground truth (a "
@@ -76,23 +79,22 @@ class Tracker:
             loaded = body
         else:
             loaded = load_body(body, shape or None)
-        if self.config.personalize:
-            raise ConfigError("personalize is not offered by the Python Tracker yet: personalise once with "
-                              "`swarmpose personalize SOURCE --out me.glb`, then pass body='me.glb'")
+        space = None
+        if self.config.personalize:  # fitted online from the start body of its shape space
+            if not isinstance(body, str):
+                raise ConfigError("personalize fits a body's shape space: give the body by name (builtin or "
+                                  "makehuman:DIR), not as a loaded body")
+            space = shape_space_for(body, shape or "", self.config.triangles)
+            loaded = space.tracking_body(space.start)
         triangles = self.config.triangles
         self.body = loaded if len(loaded.triangles) <= triangles else loaded.tracking_lod(triangles)
         self._owns_detector = isinstance(detector, str)
         self.detector: Detector = make_detector(detector, source) if isinstance(detector, str) else detector
         self.intrinsics = intrinsics
-        tracker = (HeightFittingTracker if isinstance(body, str) and applies(body, shape or "", self.config)
-                   else BodyTracker)
-        def pipeline(seed: int) -> FramePipeline:  # one track of every person (an ensemble's member: its seed)
-            settings = replace(self.config, seed=seed)
-            return FramePipeline(
-                self.detector, lambda intr, body_id: tracker(self.body, intr, settings, body_id=body_id),
-                settings.max_people, settings.retire_frames, backward=settings.backward,
-                centred_sigma_s=settings.centred_sigma_s)
-        self.pipeline = ensemble_of(pipeline, self.config.seed, self.config.ensemble)
+        self.pipeline = build_pipeline("offline", self.body, self.detector, self.config,
+                                       body_spec=body if isinstance(body, str) else "", shape=shape or "",
+                                       space=space, floor=floor or ("auto" if coordinates == "world" else "off"),
+                                       coordinates=coordinates)
         self._next_index = 0
         self._closed = False
 

@@ -12,13 +12,11 @@ from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import PersonalisationError
 from swarmpose.core.progress import progress_bar
 from swarmpose.detect.registry import make_detector
+from swarmpose.pipeline.builder import build_pipeline
 from swarmpose.pipeline.config import ServiceConfig
-from swarmpose.pipeline.ensemble import ensemble_of
 from swarmpose.pipeline.run import remember_frames, results
-from swarmpose.pipeline.step import FramePipeline
 from swarmpose.sources.base import Frame
 from swarmpose.sources.registry import open_source
-from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.personalise import FitSettings, ShapeFit, ShapeSample, fit_shape
 
 log = logging.getLogger(__name__)
@@ -51,11 +49,9 @@ def collect_samples(config: ServiceConfig, space: ShapeSpace, frames: int,
         stack.callback(source.close)
         detector = make_detector(config.detector, source, config.models)
         stack.callback(detector.close)
-        def member(seed: int) -> FramePipeline:  # one track (an ensemble's member: its seed)
-            settings = replace(tracker_config, seed=seed)
-            return FramePipeline(detector, lambda k, body_id: BodyTracker(body, k, settings, body_id=body_id),
-                                 backward=settings.backward, centred_sigma_s=settings.centred_sigma_s)
-        pipeline = ensemble_of(member, tracker_config.seed, tracker_config.ensemble)
+        # one person with the space's start body as it is (the fit measures the shape itself)
+        pipeline = build_pipeline("offline", body, detector, replace(tracker_config, personalize=0),
+                                  one_person=True)
         frames_of: dict[int, Frame] = {}
         with progress_bar("personalise: track", frames or getattr(source, "length", None),
                           enabled=show_progress) as bar:

@@ -16,21 +16,20 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from swarmpose.body.loader import load_body
-from swarmpose.body.shape_space import ShapeSpace, shape_space_for
+from swarmpose.body.shape_space import shape_space_for
 from swarmpose.body.skinned import SkinnedBody
-from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.progress import progress_bar
 from swarmpose.detect.joints import Detector
 from swarmpose.detect.registry import make_detector, resolve_detector
 from swarmpose.messages.build import info_message
+from swarmpose.pipeline.builder import build_pipeline
 from swarmpose.pipeline.config import ServiceConfig
-from swarmpose.pipeline.ensemble import EnsemblePipeline, ensemble_of
+from swarmpose.pipeline.ensemble import EnsemblePipeline
 from swarmpose.pipeline.features import refuse
 from swarmpose.pipeline.status import HealthFileSink, LogSink, WorkerStats, latency_summary
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.pipeline.worker import Worker
-from swarmpose.pipeline.world import make_world
 from swarmpose.publish.files import open_recording
 from swarmpose.publish.rerun_view import open_view_sink
 from swarmpose.publish.sink import Sink
@@ -38,11 +37,6 @@ from swarmpose.publish.zenoh_link import ZenohSink
 from swarmpose.sim.scoring import ScoreSink
 from swarmpose.sources.base import DeferredFrame, Frame, FrameSource, SkippedFrame
 from swarmpose.sources.registry import open_source
-from swarmpose.tracking.auto_height import ESTIMATES as HEIGHT_ESTIMATES
-from swarmpose.tracking.auto_height import HeightFittingTracker, applies
-from swarmpose.tracking.body_tracker import BodyTracker
-from swarmpose.tracking.config import TrackerConfig
-from swarmpose.tracking.online_personalise import PersonalisingTracker
 
 log = logging.getLogger(__name__)
 
@@ -73,39 +67,6 @@ class Parts:
         return float(getattr(self.source, "fps", 0.0) or 30.0)
 
 
-def make_pipeline(body: SkinnedBody, detector: Detector, config: ServiceConfig,
-                  space: ShapeSpace | None = None) -> FramePipeline | EnsemblePipeline:
-    """The per-frame step tracking ``body`` with ``detector`` under ``config.tracker``; with a
-    shape ``space`` and ``config.tracker.personalize`` N > 0, each person's tracker personalises
-    its body from that person's first N tracked frames; else, where the automatic height applies
-    (:func:`~swarmpose.tracking.auto_height.applies`), each scales it to the person's stature.
-    Both report in the status and info messages' ``personalisation``. With ``config.tracker.ensemble``
-    N > 1, N such pipelines with seeds seed .. seed + N - 1, averaged (:mod:`swarmpose.pipeline.ensemble`)."""
-    t = config.tracker
-    if space is not None and t.personalize > 0:
-        def tracker_of(settings: TrackerConfig, intrinsics: Intrinsics, body_id: int) -> BodyTracker:
-            return PersonalisingTracker(space, t.personalize, intrinsics, settings, body_id=body_id)
-        reported = t.personalize
-    elif applies(config.body, config.shape, t):
-        def tracker_of(settings: TrackerConfig, intrinsics: Intrinsics, body_id: int) -> BodyTracker:
-            return HeightFittingTracker(body, intrinsics, settings, body_id=body_id)
-        reported = HEIGHT_ESTIMATES
-    else:
-        def tracker_of(settings: TrackerConfig, intrinsics: Intrinsics, body_id: int) -> BodyTracker:
-            return BodyTracker(body, intrinsics, settings, body_id=body_id)
-        reported = 0  # the frames each body's personalisation needs, as status and info report it
-
-    def pipeline(seed: int) -> FramePipeline:  # one track of every person (an ensemble's member: its seed;
-        # only the first one's world frame is published)
-        settings = replace(t, seed=seed)
-        return FramePipeline(detector, lambda intrinsics, body_id: tracker_of(settings, intrinsics, body_id),
-                             t.max_people, t.retire_frames, personalise_frames=reported,
-                             world=make_world(config.floor, config.coordinates) if seed == t.seed else None,
-                             backward=t.backward,
-                             centred_sigma_s=t.centred_sigma_s)
-    return ensemble_of(pipeline, t.seed, t.ensemble)
-
-
 def warn_of_another_body(source: FrameSource, body: SkinnedBody, config: ServiceConfig) -> None:
     """A warning when ``source`` was rendered with another body than the one tracking it (a
     ``swarmpose synth`` sequence records its body in ``sequence.json``): the shape mismatch
@@ -119,10 +80,13 @@ def warn_of_another_body(source: FrameSource, body: SkinnedBody, config: Service
 
 
 def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score: bool = True,
-               need_ground_truth: bool = False) -> Parts:
-    """Open the source, detector and body of ``config`` (closed by ``stack``); with ``out``,
-    the replay files there; with ``score`` and a source that has ground truth, a scorer.
-    need_ground_truth: ConfigError at once (before any file is written) for a source without."""
+               need_ground_truth: bool = False, driver: str = "offline") -> Parts:
+    """Open the source, detector and body of ``config`` (closed by ``stack``) and the pipeline of
+    ``driver`` (:func:`~swarmpose.pipeline.builder.build_pipeline`); with ``out``, the replay files
+    there; with ``score`` and a source that has ground truth, a scorer. need_ground_truth:
+    ConfigError at once (before any file is written) for a source without; a feature ``driver``
+    cannot run is refused before anything is opened."""
+    refuse(driver, config.tracker)
     config.require_source()
     space = None
     if config.tracker.personalize > 0:  # the body is fitted online: track with the space's start body
@@ -144,7 +108,9 @@ def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score:
                           "written by `swarmpose synth`; use `swarmpose track` for other sources")
     triangles = config.tracker.triangles
     tracking_body = body if len(body.triangles) <= triangles else body.tracking_lod(triangles)
-    parts = Parts(config, tracking_body, source, detector, make_pipeline(tracking_body, detector, config, space))
+    pipeline = build_pipeline(driver, tracking_body, detector, config.tracker, body_spec=config.body,
+                              shape=config.shape, space=space, floor=config.floor, coordinates=config.coordinates)
+    parts = Parts(config, tracking_body, source, detector, pipeline)
     if out:
         # the bodies that --personalize or the automatic height change (those the pipeline reports on)
         body_of = parts.pipeline.body_of if parts.pipeline.personalise_frames else None
@@ -189,8 +155,7 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
     files (``out`` or ``record``), the ground-truth scorer, the log, the health file, (with
     ``progress``) a progress bar, and last the caller's ``sinks``. replay: no dropped frames, no
     pacing, no looping. on_acquired: the worker's observer of the frames it takes from the source."""
-    refuse("threaded", config.tracker)  # before anything is opened
-    parts = open_parts(config, stack, out=out or config.record)
+    parts = open_parts(config, stack, out=out or config.record, driver="threaded")
     worker: Worker | None = None
 
     def info() -> dict:  # zenoh's thread: only references and the stats' snapshot are read here
