@@ -117,7 +117,8 @@ def test_lines_written_before_a_failure_are_kept(sequence, tmp_path):
     out = tmp_path / "poses.jsonl"
     body = load_body("builtin")
     config = TrackerConfig(mode="lift")
-    pipeline = FramePipeline(make_detector("simulated", source), lambda intr, _id: BodyTracker(body, intr, config))
+    pipeline = FramePipeline(make_detector("simulated", source), lambda intr, _id: BodyTracker(body, intr, config),
+                             max_people=1)
     with pytest.raises(SourceError):
         run_sequence(dying(), pipeline, [JsonlSink(out)], progress=False)
     lines = [validate(json.loads(x)) for x in out.read_text().splitlines()]

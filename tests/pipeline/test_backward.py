@@ -114,7 +114,7 @@ def test_a_stopped_run_hands_on_the_frames_it_held(wave_sequence):
     config = TrackerConfig(particles=12, generations=8, max_people=1, backward=10)
     pipeline = FramePipeline(make_detector("simulated", source),
                              lambda intr, body_id: BodyTracker(load_body("builtin"), intr, config, body_id=body_id),
-                             backward=config.backward)
+                             max_people=1, backward=config.backward)
     summary = run_sequence(stopping(), pipeline, [Keep()], progress=False, stop=stop)
     source.close()
     assert [m["frame"] for m in got] == [0, 1, 2] and summary.interrupted and summary.frames == 3
@@ -138,7 +138,7 @@ def test_a_source_that_breaks_hands_on_the_frames_held_as_found_then_raises(wave
     config = TrackerConfig(particles=12, generations=8, max_people=1, **offline)
     pipeline = FramePipeline(make_detector("simulated", source),
                              lambda intr, body_id: BodyTracker(load_body("builtin"), intr, config, body_id=body_id),
-                             backward=config.backward, centred_sigma_s=config.centred_sigma_s)
+                             max_people=1, backward=config.backward, centred_sigma_s=config.centred_sigma_s)
     got, summary = [], RunSummary()
     with pytest.raises(OSError, match="truncated"):
         for result in results(breaking(), pipeline, summary=summary):
@@ -233,7 +233,7 @@ def test_a_person_whose_backward_run_fails_keeps_the_forward_fits_and_it_is_logg
     config = TrackerConfig(particles=12, generations=8, max_people=1, backward=3)
     pipeline = FramePipeline(make_detector("simulated", source),
                              lambda intr, body_id: BodyTracker(load_body("builtin"), intr, config, body_id=body_id),
-                             backward=config.backward)
+                             max_people=1, backward=config.backward)
     held = BackwardPass(config.backward)
     pipeline.on_step = held.record
     forward = [pipeline.process(item) for item, _ in zip(source, range(3))]

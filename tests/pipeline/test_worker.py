@@ -65,7 +65,7 @@ def make_worker(sequence, body, sinks, config=LIFT, *, drop_stale=False, source=
     uri = f"folder:{sequence}"
     source = source or open_source(uri)
     detector = detector or make_detector("simulated", source)
-    pipeline = FramePipeline(detector, lambda intr, _id: BodyTracker(body, intr, config))
+    pipeline = FramePipeline(detector, lambda intr, _id: BodyTracker(body, intr, config), max_people=1)
     return Worker(lambda: open_source(uri), pipeline, sinks,
                   camera="test", drop_stale=drop_stale, source_uri=uri, detector_spec="simulated",
                   status_period_s=kw.pop("status_period_s", 0.2), source=source, **kw)

@@ -78,7 +78,7 @@ def worker_on(sequence, body, sink, *more_sinks, **kw) -> Worker:
     uri = f"folder:{sequence}"
     source = open_source(uri)
     pipeline = FramePipeline(make_detector("simulated", source),
-                             lambda intr, _id: BodyTracker(body, intr, TrackerConfig(mode="lift")))
+                             lambda intr, _id: BodyTracker(body, intr, TrackerConfig(mode="lift")), max_people=1)
     return Worker(lambda: open_source(uri), pipeline, [sink, *more_sinks], camera="cam0",
                   drop_stale=False, source_uri=uri, detector_spec="simulated", status_period_s=0.2, source=source,
                   zenoh_state=sink.state, **kw)

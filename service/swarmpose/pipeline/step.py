@@ -44,6 +44,7 @@ from swarmpose.pipeline.velocity import JointVelocities
 from swarmpose.pipeline.world import NOT_FITTED, WorldFrame
 from swarmpose.sources.base import Frame, SkippedFrame, exc_message
 from swarmpose.tracking.body_tracker import BodyTracker
+from swarmpose.tracking.config import tracker_default
 from swarmpose.tracking.people_tracker import PeopleTracker
 from swarmpose.tracking.result import FrameResult
 
@@ -118,7 +119,7 @@ class FramePipeline:
     """
 
     def __init__(self, detector: Detector, make_tracker: Callable[[Intrinsics, int], BodyTracker],
-                 max_people: int = 1, retire_frames: int = 30, personalise_frames: int = 0,
+                 max_people: int, retire_frames: int = tracker_default("retire_frames"), personalise_frames: int = 0,
                  world: WorldFrame | None = None, backward: int = 0, centred_sigma_s: float = 0.0):
         self.detector, self.make_tracker = detector, make_tracker
         self.backward, self.centred_sigma_s = int(backward), float(centred_sigma_s)

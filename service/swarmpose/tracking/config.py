@@ -3,17 +3,19 @@ every command's flags, the TOML file and ``SWARMPOSE_*`` (see :mod:`swarmpose.co
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING, Any
 
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import check_settings, setting
-from swarmpose.tracking.pso import VARIANTS, PsoConfig
 
 if TYPE_CHECKING:  # the objective (body model, scipy) is imported where the weights are asked for
     from swarmpose.tracking.objective import ObjectiveWeights
+    from swarmpose.tracking.pso import PsoConfig
 
 MODES = ("hybrid", "depth", "joints", "lift")
+VARIANTS = ("canonical", "perturbed")
+"""The PSO variants (:mod:`swarmpose.tracking.pso`)."""
 SMOOTHING = ("off", "one-euro", "centred")
 MODE_WEIGHTS = {"hybrid": (3.0, 1.0), "depth": (1.0, 0.0), "joints": (0.0, 1.0)}
 """(w_D, w_J) of each mode; ``lift`` fits no model."""
@@ -147,6 +149,8 @@ class TrackerConfig:
     @property
     def pso_config(self) -> PsoConfig:
         """The swarm's size, budget and variant."""
+        from swarmpose.tracking.pso import PsoConfig
+
         return PsoConfig(particles=self.particles, generations=self.generations, variant=self.pso)
 
     @property
@@ -160,3 +164,12 @@ class TrackerConfig:
                                 alpha=self.alpha, threshold_m=self.threshold_m, min_score=self.min_score,
                                 label_swaps=self.label_swaps, penetration=self.penetration,
                                 arm_prior=self.arm_prior)
+
+
+def tracker_default(name: str) -> Any:
+    """The default of :class:`TrackerConfig`'s setting ``name``: the one place a tracker default is
+    declared; the PSO's and the objective's own defaults are read from here."""
+    for f in fields(TrackerConfig):
+        if f.name == name:
+            return f.default
+    raise KeyError(f"TrackerConfig has no setting {name!r}")

@@ -57,6 +57,7 @@ from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError
 from swarmpose.detect.joints import Joints2D
+from swarmpose.tracking.config import MODE_WEIGHTS, tracker_default
 from swarmpose.tracking.lift import lift_detection
 
 SWAP_COST = 0.05
@@ -102,14 +103,14 @@ class ObjectiveWeights:
     silhouette term, see :mod:`~swarmpose.tracking.personalise`; 0 in tracking). E_S applies
     only where the depth term does (w_D > 0 and depth in the box)."""
 
-    depth: float = 3.0
-    joints: float = 1.0
-    alpha: float = 0.97
-    threshold_m: float = 0.30
-    min_score: float = 0.3
-    label_swaps: bool = True
-    penetration: float = 1.0
-    arm_prior: float = 0.0
+    depth: float = MODE_WEIGHTS["hybrid"][0]
+    joints: float = MODE_WEIGHTS["hybrid"][1]
+    alpha: float = tracker_default("alpha")
+    threshold_m: float = tracker_default("threshold_m")
+    min_score: float = tracker_default("min_score")
+    label_swaps: bool = tracker_default("label_swaps")
+    penetration: float = tracker_default("penetration")
+    arm_prior: float = tracker_default("arm_prior")
     silhouette: float = 0.0
 
     def __post_init__(self) -> None:

@@ -43,6 +43,7 @@ from swarmpose.detect.per_person import PersonDetection
 from swarmpose.sources.base import Frame
 from swarmpose.tracking.association import NO_PAIR, Assignment, assign, colour_histogram, pair_costs
 from swarmpose.tracking.body_tracker import BodyTracker
+from swarmpose.tracking.config import tracker_default
 from swarmpose.tracking.init_pose import NO_TORSO
 from swarmpose.tracking.result import BodyResult
 
@@ -127,8 +128,9 @@ class PeopleTracker:
     retire_frames: frames a track may go unseen before it is retired.
     """
 
-    def __init__(self, make_tracker: Callable[[int], BodyTracker], max_people: int = 6, retire_frames: int = 30,
-                 first_id: int = 0, counts: PeopleCounts | None = None):
+    def __init__(self, make_tracker: Callable[[int], BodyTracker], max_people: int = tracker_default("max_people"),
+                 retire_frames: int = tracker_default("retire_frames"), first_id: int = 0,
+                 counts: PeopleCounts | None = None):
         self.make_tracker, self.max_people, self.retire_frames = make_tracker, int(max_people), int(retire_frames)
         self.tracks: list[Track] = []
         self.counts = counts or PeopleCounts()

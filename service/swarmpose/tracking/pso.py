@@ -32,9 +32,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmpose.core.errors import ConfigError
+from swarmpose.tracking.config import VARIANTS, tracker_default
 
 UPDATES = ("constriction", "printed")
-VARIANTS = ("canonical", "perturbed")
 
 
 def constriction_factor(c1: float, c2: float) -> float:
@@ -49,11 +49,11 @@ def constriction_factor(c1: float, c2: float) -> float:
 class PsoConfig:
     """Swarm size, budget and constants. ``variant`` canonical|perturbed, ``update`` constriction|printed."""
 
-    particles: int = 64
-    generations: int = 64
+    particles: int = tracker_default("particles")
+    generations: int = tracker_default("generations")
     c1: float = 2.8
     c2: float = 1.3
-    variant: str = "perturbed"
+    variant: str = tracker_default("pso")
     update: str = "constriction"
     perturb_every: int = 8
     perturb_fraction: float = 0.5
