@@ -33,4 +33,6 @@ def test_lean_frames_and_the_start_only_with_a_budget():
     from swarmpose.tracking.budget import LEAN_BELOW, START_SHARE, lean_frame, start_budget
 
     assert not lean_frame(0.0, 6) and lean_frame(100.0, LEAN_BELOW - 1) and not lean_frame(100.0, LEAN_BELOW)
-    assert start_budget(64, 0.0) == 64 and start_budget(64, 100.0) == int(64 * START_SHARE)
+    assert start_budget(64, 0.0, 64, 64) == (64, 64) and start_budget(64, 0.0, 32, 128) == (64, 128)
+    least = int(64 * START_SHARE)  # live: the share of start_budget, whatever the frame's search runs
+    assert start_budget(64, 100.0, 64, 64) == (least, least) and start_budget(64, 100.0, 128, 128) == (least, least)

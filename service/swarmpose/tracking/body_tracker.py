@@ -359,9 +359,10 @@ class BodyTracker:
         # the start runs once per track, so it gets at least config.start_budget (a smaller one left a side
         # view's start unconverged); live, a start that keeps up
         first = generations is None
-        least = start_budget(self.config.start_budget, self.budget_ms)
-        budget = max(self.config.generations, least) if first else generations
-        particles = max(self.config.particles, least) if first else self.config.particles
+        particles, budget = start_budget(self.config.start_budget, self.budget_ms, self.config.particles,
+                                         self.config.generations)
+        if not first:  # a re-check: the frame's particles, its generations
+            particles, budget = self.config.particles, generations
         # joints only (no depth): the joint stage is the whole fit, at twice the generations
         pso = replace(self.config.pso_config, variant="perturbed",
                       generations=budget * (1 if joint_objective is not None else 2), particles=particles)

@@ -75,7 +75,11 @@ def lean_frame(budget_ms: float, generations: int) -> bool:
     return budget_ms > 0 and generations < LEAN_BELOW
 
 
-def start_budget(configured: int, budget_ms: float) -> int:
-    """The least particles and generations of a track's start: ``configured``, or with a budget its
-    :data:`START_SHARE`."""
-    return max(int(configured * START_SHARE), 1) if budget_ms > 0 else configured
+def start_budget(configured: int, budget_ms: float, particles: int, generations: int) -> tuple[int, int]:
+    """(particles, generations) of each of a track's start PSOs: offline at least ``configured``
+    (``start_budget``) and at least the frame's ``particles`` and ``generations``; with a budget
+    :data:`START_SHARE` of ``configured`` each, whatever the frame's search runs."""
+    if budget_ms > 0:
+        least = max(int(configured * START_SHARE), 1)
+        return least, least
+    return max(particles, configured), max(generations, configured)
