@@ -361,8 +361,8 @@ class BodyTracker:
         first = generations is None
         particles, budget = start_budget(self.config.start_budget, self.budget_ms, self.config.particles,
                                          self.config.generations)
-        if not first:  # a re-check: the frame's particles, its generations
-            particles, budget = self.config.particles, generations
+        if not first:  # a re-check: the frame's generations; live, the start's particles
+            particles, budget = (particles if self.budget_ms > 0 else self.config.particles), generations
         # joints only (no depth): the joint stage is the whole fit, at twice the generations
         pso = replace(self.config.pso_config, variant="perturbed",
                       generations=budget * (1 if joint_objective is not None else 2), particles=particles)
