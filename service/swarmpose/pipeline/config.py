@@ -75,7 +75,7 @@ class ServiceConfig:
                                "fast as possible)", minimum=0.0)
     """Live cameras set their own rate."""
     loop: bool = setting(False, "start a recording over when it ends (serve)")
-    frame_budget_ms: float = setting(100.0, "serve: the time a frame's tracking may take, ms (0: the full search "
+    frame_budget_ms: float = setting(60.0, "serve: the time a frame's tracking may take, ms (0: the full search "
                                             "every frame)", minimum=0.0)
     """Each frame's search and polish are sized to it (shared by the people in view), so the poses
     keep up with the camera (:mod:`swarmpose.tracking.budget`)."""
