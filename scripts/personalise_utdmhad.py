@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from swarmpose.body.skeleton import EVAL_JOINTS
+from swarmpose.personalise.personalise import body_measures
 from swarmpose.pipeline.config import ServiceConfig
 from swarmpose.pipeline.personalise_run import personalise
 from swarmpose.sources.utdmhad import UtdMhadSource, measured_height
-from swarmpose.tracking.personalise import body_measures
 
 ASSETS = Path(__file__).resolve().parents[1].parent / "shared" / "assets"
 LIMBS = {"upper_arm": ("shoulder", "elbow"), "forearm": ("elbow", "wrist"), "thigh": ("hip", "knee"),

@@ -209,7 +209,7 @@ def test_each_id_is_refit_on_the_steps_whose_fit_it_published():
 def test_a_step_keeps_the_body_its_tracker_had_then(wave_sequence):
     """A retired person's tracker goes back to its start body (``new_person``) before the window's
     backward pass: the step recorded the scaled body the person was tracked with."""
-    from swarmpose.tracking.auto_height import HeightFittingTracker, scaled_body
+    from swarmpose.personalise.auto_height import HeightFittingTracker, scaled_body
 
     source = open_source(f"folder:{wave_sequence}")
     frame = next(iter(source))

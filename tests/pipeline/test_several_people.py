@@ -14,6 +14,7 @@ from swarmpose.body.loader import load_body
 from swarmpose.detect.people import segment_people
 from swarmpose.detect.per_person import MASK_GREY, PersonDetection, masked_colour
 from swarmpose.detect.simulated import SimulatedDetector
+from swarmpose.people.people_tracker import PeopleTracker
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.pipeline.worker import Worker
 from swarmpose.sim.people_metrics import TruePerson, score_people
@@ -23,7 +24,6 @@ from swarmpose.sources.groundtruth import load_ground_truth
 from swarmpose.sources.registry import open_source
 from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.config import TrackerConfig
-from swarmpose.tracking.people_tracker import PeopleTracker
 
 FRAMES = 6
 PEOPLE = ("builtin:male:builtin:walk@-0.7,0.3", "builtin:female:builtin:wave@0.6,-0.6",

@@ -44,7 +44,7 @@ class ShapeSpace(ABC):
     lower: np.ndarray
     upper: np.ndarray
     own_pose_stage: bool = False
-    """Whether a fit ends with the own-pose search (:mod:`~swarmpose.tracking.own_pose_search`): only
+    """Whether a fit ends with the own-pose search (:mod:`~swarmpose.personalise.own_pose_search`): only
     where its steps, shares of each parameter's range, are tuned for this space."""
 
     def __init__(self, triangles: int = 1500):

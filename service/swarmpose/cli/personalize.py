@@ -1,7 +1,7 @@
 """``swarmpose personalize SOURCE --out me.glb``: the person's body shape from ordinary motion.
 
 Tracks the first ``--frames`` frames with the shape space's start body, fits the shape
-(:mod:`swarmpose.tracking.personalise`), writes the full-resolution skinned GLB (``--body
+(:mod:`swarmpose.personalise.personalise`), writes the full-resolution skinned GLB (``--body
 me.glb`` loads it; the parameters are kept in its extras) and prints the parameters, the height
 and the volume. Every tracker flag applies to the tracking and the pose refits.
 """
@@ -17,15 +17,15 @@ from swarmpose.cli.common import DEFAULTS, non_negative_int, positive_int, quiet
 from swarmpose.cli.settings import add_flags, advanced
 from swarmpose.cli.track import TRACK_SETTINGS, add_source_argument, settings_of
 from swarmpose.core.errors import ConfigError
+from swarmpose.personalise.fit_settings import FitSettings
 from swarmpose.pipeline.config import ServiceConfig
-from swarmpose.tracking.fit_settings import FitSettings
 
 
 def cmd_personalize(args: argparse.Namespace) -> int:
     """Estimate the shape, write the GLB, print what was found."""
     from swarmpose.body.gltf_write import save_glb
+    from swarmpose.personalise.personalise import body_measures
     from swarmpose.pipeline.personalise_run import personalise
-    from swarmpose.tracking.personalise import body_measures
 
     config = settings_of(args)
     out = Path(args.out)

@@ -161,7 +161,7 @@ def ransac_plane_inliers(points: np.ndarray, within: float, hypotheses: int, see
     them that has the most such points, out of ``hypotheses`` random triples drawn by a generator
     of its own seeded with ``seed``. Not Open3D's ``segment_plane``, which :func:`fit_floor` uses: that
     draws from one process-wide generator, so a caller in another thread than the detection thread's
-    floor fit (the automatic height's measure, :mod:`swarmpose.tracking.stature`) would make neither
+    floor fit (the automatic height's measure, :mod:`swarmpose.personalise.stature`) would make neither
     repeat."""
     if len(points) < 3:
         return points[:0]

@@ -40,7 +40,7 @@ class Tracker:
     :class:`~swarmpose.body.skinned.SkinnedBody`; shape: the body's shape preset or
     measurements (spec strings only). A ``"builtin"`` or ``"makehuman:DIR"`` body without a
     shape is scaled to each person's height on their first upright frames (``auto_height``,
-    :mod:`swarmpose.tracking.auto_height`; a loaded body is kept as it is). detector: a spec
+    :mod:`swarmpose.personalise.auto_height`; a loaded body is kept as it is). detector: a spec
     (``"auto"``: the recorded detections of a ``source`` that has them, else ``"movenet"``;
     ``"movenet"``/``"blazepose"`` from the
     models folder, ``$SWARMPOSE_MODELS`` first; ``"onnx:MODEL.onnx"``, ``"openpose-json:DIR"``,

@@ -18,15 +18,15 @@ from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError
 from swarmpose.detect.joints import Detector
+from swarmpose.personalise.auto_height import ESTIMATES as HEIGHT_ESTIMATES
+from swarmpose.personalise.auto_height import HeightFittingTracker, applies
+from swarmpose.personalise.online_personalise import PersonalisingTracker
 from swarmpose.pipeline.ensemble import EnsemblePipeline, ensemble_of
 from swarmpose.pipeline.features import refuse
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.pipeline.world import make_world
-from swarmpose.tracking.auto_height import ESTIMATES as HEIGHT_ESTIMATES
-from swarmpose.tracking.auto_height import HeightFittingTracker, applies
 from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.config import TrackerConfig
-from swarmpose.tracking.online_personalise import PersonalisingTracker
 
 TrackerFactory = Callable[[TrackerConfig, Intrinsics, int], BodyTracker]
 """(settings, camera, body id) -> the tracker of one person."""

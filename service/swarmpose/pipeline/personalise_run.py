@@ -1,5 +1,5 @@
 """``swarmpose personalize``'s run: track the first frames of a source with the shape space's
-start body (one person), then fit the shape (:func:`swarmpose.tracking.personalise.fit_shape`)."""
+start body (one person), then fit the shape (:func:`swarmpose.personalise.personalise.fit_shape`)."""
 
 from __future__ import annotations
 
@@ -12,12 +12,12 @@ from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import PersonalisationError
 from swarmpose.core.progress import progress_bar
 from swarmpose.detect.registry import make_detector
+from swarmpose.personalise.personalise import FitSettings, ShapeFit, ShapeSample, fit_shape
 from swarmpose.pipeline.builder import build_pipeline
 from swarmpose.pipeline.config import ServiceConfig
 from swarmpose.pipeline.run import remember_frames, results
 from swarmpose.sources.base import Frame
 from swarmpose.sources.registry import open_source
-from swarmpose.tracking.personalise import FitSettings, ShapeFit, ShapeSample, fit_shape
 
 log = logging.getLogger(__name__)
 

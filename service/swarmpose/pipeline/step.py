@@ -14,7 +14,7 @@ joints, where the detector looks next) and the tracker, built for the first fram
 With ``max_people`` > 1 the detection half first finds the people in the depth
 (:func:`swarmpose.detect.people.segment_people`) and runs the detector on each one's crop
 (:func:`swarmpose.detect.per_person.detect_each`); the tracking half gives them to a
-:class:`~swarmpose.tracking.people_tracker.PeopleTracker` (one track and id per person).
+:class:`~swarmpose.people.people_tracker.PeopleTracker` (one track and id per person).
 Where the segmentation finds nobody, the frame is detected and tracked as with one person.
 
 With a :class:`~swarmpose.pipeline.world.WorldFrame` (``--floor``), the detection half fits the
@@ -40,12 +40,12 @@ from swarmpose.detect.joints import Detector, Joints2D
 from swarmpose.detect.people import Segmentation, segment_people
 from swarmpose.detect.per_person import PersonDetection, detect_each
 from swarmpose.gpu.errors import DeviceError
+from swarmpose.people.people_tracker import PeopleTracker
 from swarmpose.pipeline.velocity import JointVelocities
 from swarmpose.pipeline.world import NOT_FITTED, WorldFrame
 from swarmpose.sources.base import Frame, SkippedFrame, exc_message
 from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.config import tracker_default
-from swarmpose.tracking.people_tracker import PeopleTracker
 from swarmpose.tracking.result import FrameResult
 
 log = logging.getLogger(__name__)

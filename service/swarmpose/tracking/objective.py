@@ -100,7 +100,7 @@ class ObjectiveWeights:
     detected left/right pairs may match the model crossed, and w_P (per cm of an elbow or
     wrist inside the torso), w_A (per rad² of the arms' angles away from the rest pose), w_S
     (per cm of E_S, the model's pixels no observation within T confirms: the shape fit's
-    silhouette term, see :mod:`~swarmpose.tracking.personalise`; 0 in tracking). E_S applies
+    silhouette term, see :mod:`~swarmpose.personalise.personalise`; 0 in tracking). E_S applies
     only where the depth term does (w_D > 0 and depth in the box)."""
 
     depth: float = MODE_WEIGHTS["hybrid"][0]

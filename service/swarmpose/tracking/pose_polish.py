@@ -16,7 +16,7 @@ deep for an unpolished re-check to replace it. On a settled track it polishes th
 (:func:`polish_solution`), so that a later re-check's mirrored facing, polished, cannot flip a
 settled track.
 The shape fit's pose step runs without it; its last stage
-(:mod:`~swarmpose.tracking.own_pose_search`) polishes each candidate's key frames.
+(:mod:`~swarmpose.personalise.own_pose_search`) polishes each candidate's key frames.
 """
 
 from __future__ import annotations

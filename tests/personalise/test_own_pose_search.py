@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import MAKEHUMAN, makehuman_walk, needs_assets
 
-from swarmpose.tracking.own_pose_search import compass_search
+from swarmpose.personalise.own_pose_search import compass_search
 
 
 def _counting(f):
@@ -77,12 +77,12 @@ def test_with_poses_of_its_own_the_true_shape_beats_the_shape_the_poses_were_tra
     from swarmpose.body.shape_space import shape_space_for
     from swarmpose.detect.simulated import SimulatedDetector
     from swarmpose.gpu.context import ClContext
+    from swarmpose.personalise.own_pose_search import own_pose_energy
+    from swarmpose.personalise.personalise import ShapeSample, _KeyFrame
     from swarmpose.sources.folder import FolderSource
     from swarmpose.sources.groundtruth import load_ground_truth
     from swarmpose.tracking.body_tracker import BodyTracker
     from swarmpose.tracking.config import TrackerConfig
-    from swarmpose.tracking.own_pose_search import own_pose_energy
-    from swarmpose.tracking.personalise import ShapeSample, _KeyFrame
 
     space = shape_space_for(f"makehuman:{MAKEHUMAN}", None, 1500)
     true_x, wrong_x = PRESET_MACROS["female"].vector(), PRESET_MACROS[wrong].vector()

@@ -3,7 +3,7 @@
 Input: samples of one person (a frame, its detection and the pose the tracker found with the
 shape space's start body). :func:`fit_shape` chooses ``keyframes`` well-spread frames, then:
 
-0. **Sweep.** A coarse grid (:data:`~swarmpose.tracking.fit_settings.SWEEP`: gender × height) of
+0. **Sweep.** A coarse grid (:data:`~swarmpose.personalise.fit_settings.SWEEP`: gender × height) of
    shapes, each with its own pose step, picks the start: poses tracked with the start body favour
    shapes like it. Its heights
    are fixed, so E_H favours the candidate nearest the measured stature whatever its build.
@@ -11,7 +11,7 @@ shape space's start body). :func:`fit_shape` chooses ``keyframes`` well-spread f
    with the poses held, minimising the mean over the key frames of ``E + w_D·E_S`` (the
    tracker's objective E with its own weights, penetration term included, plus the silhouette
    term E_S below), plus ``w_B·E_B``, the bone-length term below, plus E_H, the stature term
-   (:mod:`~swarmpose.tracking.shape_stature`: the height measured on the depth bounds the body's,
+   (:mod:`~swarmpose.personalise.shape_stature`: the height measured on the depth bounds the body's,
    which E barely tells apart). Each frame's root may move by
    one of :data:`ROOT_OFFSETS_M` per candidate (a taller body moves its hips). Each candidate
    shape is a buffer upload into one scorer per key frame (same topology), each scorer keeping
@@ -21,7 +21,7 @@ shape space's start body). :func:`fit_shape` chooses ``keyframes`` well-spread f
    depth flips of the limbs (:mod:`~swarmpose.tracking.limb_flips`): a local refinement. Steps 1
    and 2 alternate for ``rounds`` rounds.
 3. **Own poses.** A compass search over the parameters judges each candidate shape with every key
-   frame's pose polished for it (:mod:`~swarmpose.tracking.own_pose_search`).
+   frame's pose polished for it (:mod:`~swarmpose.personalise.own_pose_search`).
 
 E_S, the silhouette term: the depth term charges an observed pixel the model misses (T) but not a
 model pixel where nothing is seen, or where the sensor sees farther than T behind the model: a
@@ -31,7 +31,7 @@ for every rendered pixel of the tile that no observation within T confirms (rend
 ``close``, normalised like E_D, cm; :meth:`~swarmpose.tracking.objective.Objective.silhouette_cm`,
 on at w_S = w_D). Its limit: an object in front of the person (closer than T)
 is charged too, so fit from a recording where the person is in full view. The fit's frames have
-their edge dropouts filled first (:func:`~swarmpose.tracking.depth_dropouts.fill_dropouts`),
+their edge dropouts filled first (:func:`~swarmpose.personalise.depth_dropouts.fill_dropouts`),
 which E_S would otherwise charge as empty space and shrink the body by (the observed bone lengths
 are lifted on the filled depth too; the pose step, the stature measure and the online collection's
 hidden share still read the frames as they are).
@@ -46,7 +46,7 @@ so the observed length is the median less that excess, estimated from the spread
 body (a keypoint's depth is the nearest surface's, pushed back by a constant per joint). So
 before the sweep and each round the
 lift is run on the current shape's own noise-free render at the key frames' poses
-(:func:`~swarmpose.tracking.lift_bias.lift_bias`), and E_B's lengths are the observed ones less
+(:func:`~swarmpose.personalise.lift_bias.lift_bias`), and E_B's lengths are the observed ones less
 that bias: like E, E_B then compares what the sensor and the lift make of a body with what they
 made of the person. The bias is each sweep candidate's own (its genders are far apart, and the
 bias flips sign between male and female bodies), then in each round the current shape's, used
@@ -85,15 +85,15 @@ from swarmpose.core.errors import ConfigError, PersonalisationError
 from swarmpose.detect.joints import Joints2D
 from swarmpose.gpu.context import ClContext
 from swarmpose.gpu.scorer import ParticleScorer
+from swarmpose.personalise import shape_stature
+from swarmpose.personalise.depth_dropouts import fill_dropouts
+from swarmpose.personalise.fit_settings import FitSettings
+from swarmpose.personalise.lift_bias import LIMB_BONES, lift_bias, typical_depth
+from swarmpose.personalise.own_pose_search import FIRST_STEP, LEAST_STEP, compass_search, own_pose_energy
 from swarmpose.sources.base import Frame
-from swarmpose.tracking import shape_stature
 from swarmpose.tracking.body_tracker import BodyTracker, observed_depth
 from swarmpose.tracking.config import TrackerConfig
-from swarmpose.tracking.depth_dropouts import fill_dropouts
-from swarmpose.tracking.fit_settings import FitSettings
-from swarmpose.tracking.lift_bias import LIMB_BONES, lift_bias, typical_depth
 from swarmpose.tracking.objective import JointTargets, Objective
-from swarmpose.tracking.own_pose_search import FIRST_STEP, LEAST_STEP, compass_search, own_pose_energy
 from swarmpose.tracking.pso import PsoConfig, minimise
 
 log = logging.getLogger(__name__)
@@ -165,7 +165,7 @@ def debiased_length(lengths: np.ndarray, noise_axes: float = NOISE_AXES) -> floa
 
 def fitting_depth(frame: Frame) -> np.ndarray:
     """The depth (H, W) float32 m (0: none) the fit reads of ``frame``: invalid readings at 0,
-    edge dropouts filled (:func:`~swarmpose.tracking.depth_dropouts.fill_dropouts`)."""
+    edge dropouts filled (:func:`~swarmpose.personalise.depth_dropouts.fill_dropouts`)."""
     return fill_dropouts(observed_depth(frame.depth))
 
 

@@ -4,7 +4,7 @@ The default bodies are 1.75 m tall; people are not, and a body of the wrong heig
 worse. Personalisation (``--personalize N``) fits the whole shape but costs
 tens of seconds; this is its cheap first step, on by default (``auto_height``).
 
-**The measure** (:mod:`swarmpose.tracking.stature`, whose functions and constants this paragraph
+**The measure** (:mod:`swarmpose.personalise.stature`, whose functions and constants this paragraph
 and the next name: :func:`person_stature`). At a tracked frame where the person stands upright on
 at least one leg, by the fitted pose (:func:`upright`) and by the lifted joints J^e
 (:func:`lifted_upright`), the stature is the height of the top of the head above the floor, along
@@ -53,11 +53,11 @@ from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
 from swarmpose.detect.joints import Joints2D
 from swarmpose.gpu.context import ClContext
+from swarmpose.personalise.stature import upright_stature
 from swarmpose.sources.base import Frame
 from swarmpose.tracking.body_tracker import BodyTracker, observed_depth
 from swarmpose.tracking.config import TrackerConfig
 from swarmpose.tracking.result import BodyResult
-from swarmpose.tracking.stature import upright_stature
 
 log = logging.getLogger(__name__)
 

@@ -1,6 +1,6 @@
 """A standing person's stature measured on the depth, where a fitted body says where to look.
 
-Used by the automatic height (:mod:`swarmpose.tracking.auto_height`; the method, and why the
+Used by the automatic height (:mod:`swarmpose.personalise.auto_height`; the method, and why the
 fitted model's own size stays out of it, are in its docstring). :func:`person_stature` measures
 one frame; :func:`upright` and :func:`lifted_upright` say whether a frame may be measured.
 """

@@ -1,4 +1,4 @@
-"""The lift's own bias on a body (E_B of the shape fit, :mod:`swarmpose.tracking.personalise`):
+"""The lift's own bias on a body (E_B of the shape fit, :mod:`swarmpose.personalise.personalise`):
 how much lifting a body's own joints on its own noise-free render lengthens its limbs.
 
 The lift misplaces joints by amounts that depend on the body (a keypoint's depth is the nearest

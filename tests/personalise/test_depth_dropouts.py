@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmpose.tracking.depth_dropouts import fill_dropouts
+from swarmpose.personalise.depth_dropouts import fill_dropouts
 
 PERSON_M, WALL_M = 3.0, 4.5
 

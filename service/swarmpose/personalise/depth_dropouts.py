@@ -2,7 +2,7 @@
 
 A Kinect-like sensor drops many pixels along a depth edge (the simulator: 60 % of the pixels
 whose 3 × 3 neighbourhood spans more than 5 cm, on both sides of the edge). The shape fit charges
-a model pixel with no observation as if nothing were there (E_S, :mod:`~swarmpose.tracking.personalise`),
+a model pixel with no observation as if nothing were there (E_S, :mod:`~swarmpose.personalise.personalise`),
 so every dropout on the person's outline would pull the fitted body in.
 
 :func:`fill_dropouts` gives a zero pixel the median of its valid 8-neighbours where at least

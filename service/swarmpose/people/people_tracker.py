@@ -4,7 +4,7 @@ each with a stable id.
 Per frame (:meth:`PeopleTracker.step`), given the people the depth segmentation found and
 each one's 2D joints (:func:`swarmpose.detect.per_person.detect_each`):
 
-1. **Association** (:mod:`swarmpose.tracking.association`): the tracks' expected centres
+1. **Association** (:mod:`swarmpose.people.association`): the tracks' expected centres
    (last segment centre moved by the track's velocity) against the segments' centres, plus
    their colour histograms; Hungarian assignment with a gate.
 2. **Each matched track** runs its own PSO on the frame with *the other people's pixels
@@ -40,8 +40,8 @@ import numpy as np
 
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.detect.per_person import PersonDetection
+from swarmpose.people.association import NO_PAIR, Assignment, assign, colour_histogram, pair_costs
 from swarmpose.sources.base import Frame
-from swarmpose.tracking.association import NO_PAIR, Assignment, assign, colour_histogram, pair_costs
 from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.config import tracker_default
 from swarmpose.tracking.init_pose import NO_TORSO

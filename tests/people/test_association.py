@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from swarmpose.people.association import NO_PAIR, assign, bhattacharyya, colour_histogram, pair_costs
 from swarmpose.sim.people_metrics import TruePerson, longest_run, score_people
-from swarmpose.tracking.association import NO_PAIR, assign, bhattacharyya, colour_histogram, pair_costs
 
 
 def test_the_cheapest_pairing_wins_over_the_greedy_one():
@@ -97,7 +97,7 @@ def test_the_gate_widens_with_the_frames_dropped_since_the_last_tracked_one():
     Offline no frame is dropped: a gap (frames the source could not deliver) leaves the gate as it is."""
     from types import SimpleNamespace
 
-    from swarmpose.tracking.people_tracker import DROPPED_GATE_M, GATE_M, PeopleTracker, Track
+    from swarmpose.people.people_tracker import DROPPED_GATE_M, GATE_M, PeopleTracker, Track
 
     people = [SimpleNamespace(segment=object())]
     moved = [np.array([1.0, 0.0, 3.0])]

@@ -1,6 +1,6 @@
 """The shape fit's last stage: candidate shapes judged with poses of their own.
 
-:func:`~swarmpose.tracking.personalise.fit_shape` alternates a shape step with the key frames'
+:func:`~swarmpose.personalise.personalise.fit_shape` alternates a shape step with the key frames'
 poses held and a pose step, and poses fitted with one shape favour shapes like it: the
 alternation, started from poses tracked with the start body, settles near where it started. With
 every key frame's pose polished anew for each body, a truer shape scores lower. This stage does
@@ -8,11 +8,11 @@ that judgement during the fit: each candidate shape gets its own poses.
 
 A candidate's energy (:func:`own_pose_energy`): every key frame's pose, from where the
 alternation left it, is moved to the candidate's best root offset
-(:meth:`~swarmpose.tracking.personalise._KeyFrame.energy`) and polished on that frame's objective
+(:meth:`~swarmpose.personalise.personalise._KeyFrame.energy`) and polished on that frame's objective
 with the candidate's body (:func:`~swarmpose.tracking.pose_polish.polish_pose`, every
 coordinate); the energy is the mean of the polished values plus the stature term E_H. The bone
 term E_B is left out: its lengths are corrected by the lift's bias on the shape being judged, which
-costs a render and a lift per shape (:mod:`~swarmpose.tracking.personalise`), more than the judgement
+costs a render and a lift per shape (:mod:`~swarmpose.personalise.personalise`), more than the judgement
 itself. The polish
 of key frame i draws the same random numbers for every candidate (common random numbers), so the
 energy is a deterministic function of the shape: two candidates differ by their shapes, not by

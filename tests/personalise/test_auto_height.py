@@ -1,4 +1,4 @@
-"""The automatic height (:mod:`swarmpose.tracking.auto_height`): the uniform scale against the
+"""The automatic height (:mod:`swarmpose.personalise.auto_height`): the uniform scale against the
 built-in body built at another stature, when it applies, a tracker that finds a short subject's
 height and tracks them better for it, the BVH of the scaled body, and status and info."""
 
@@ -10,7 +10,7 @@ from conftest import ValidatingSink
 
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import ANGLE_NAMES, EVAL_JOINTS
-from swarmpose.tracking.auto_height import ESTIMATES, FACTOR_LIMITS, HeightFittingTracker, applies, scaled_body
+from swarmpose.personalise.auto_height import ESTIMATES, FACTOR_LIMITS, HeightFittingTracker, applies, scaled_body
 from swarmpose.tracking.config import TrackerConfig
 
 FACING = (0.0, 1.0, 0.0, 0.0)  # upright, facing the camera (OpenCV axes: y down)

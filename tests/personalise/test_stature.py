@@ -1,4 +1,4 @@
-"""The stature measure of the automatic height (:mod:`swarmpose.tracking.stature`): the upright
+"""The stature measure of the automatic height (:mod:`swarmpose.personalise.stature`): the upright
 tests by hand, and the stature against ray-cast (Open3D) subjects of known height alone, on a
 floor before a wall (near, and 5.5 m away with the simulator's depth noise), beside a tilted plate,
 with a hand over or on the head, and cut off by the image's border."""
@@ -11,8 +11,8 @@ import pytest
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import ANGLE_NAMES
 from swarmpose.core.camera import Intrinsics
-from swarmpose.tracking import stature
-from swarmpose.tracking.stature import lifted_upright, person_stature, upright
+from swarmpose.personalise import stature
+from swarmpose.personalise.stature import lifted_upright, person_stature, upright
 
 FACING = (0.0, 1.0, 0.0, 0.0)  # upright, facing the camera (OpenCV axes: y down)
 K = Intrinsics(width=320, height=240, fx=262.5, fy=262.5, cx=159.5, cy=119.5)

@@ -1,14 +1,14 @@
-"""The stature term of the shape fit (:func:`swarmpose.tracking.personalise.fit_shape`): the
+"""The stature term of the shape fit (:func:`swarmpose.personalise.personalise.fit_shape`): the
 person's height measured on the depth bounds the fitted body's.
 
 **Why.** The fit's own objective barely tells heights apart (across a few cm its energy moves
 by about as much as a pose refit's scatter), so some builds come out centimetres off with errors
-of one sign. The automatic height's measure (:func:`swarmpose.tracking.stature.person_stature`:
+of one sign. The automatic height's measure (:func:`swarmpose.personalise.stature.person_stature`:
 the top of the head above the floor, where the fitted pose only says where to look) reads a walk
 slightly short, hence the lopsided band below.
 
 **The term.** At every sample where the lifted joints stand upright on a straight knee
-(:func:`~swarmpose.tracking.stature.upright_stature` without the fitted pose's test: the samples
+(:func:`~swarmpose.personalise.stature.upright_stature` without the fitted pose's test: the samples
 were tracked with the start body, whose poses bend where it is too tall), the stature is
 measured; their median
 ``H`` needs :data:`MIN_MEASURES` of them. A body whose rest height lies in :data:`BAND` around
@@ -26,10 +26,10 @@ import numpy as np
 
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
+from swarmpose.personalise.fit_settings import STATURE_WEIGHT
+from swarmpose.personalise.stature import upright_stature
 from swarmpose.tracking.body_tracker import observed_depth
-from swarmpose.tracking.fit_settings import STATURE_WEIGHT
 from swarmpose.tracking.objective import JointTargets
-from swarmpose.tracking.stature import upright_stature
 
 log = logging.getLogger(__name__)
 MIN_MEASURES = 3

@@ -1,4 +1,4 @@
-"""The stature term of the shape fit (:mod:`swarmpose.tracking.shape_stature`): the band by hand,
+"""The stature term of the shape fit (:mod:`swarmpose.personalise.shape_stature`): the band by hand,
 and the stature measured on a synthetic walk's samples against the subject's true height."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from conftest import MAKEHUMAN, makehuman_walk
 
-from swarmpose.tracking.shape_stature import BAND, measured_stature, stature_energy
+from swarmpose.personalise.shape_stature import BAND, measured_stature, stature_energy
 
 
 def test_stature_energy_by_hand():
@@ -30,10 +30,10 @@ def walk_samples(tmp_path_factory):
     (samples, the tracking body, the subject's body, camera)."""
     from swarmpose.body.loader import load_body
     from swarmpose.detect.registry import make_detector
+    from swarmpose.personalise.personalise import ShapeSample
     from swarmpose.sources.registry import open_source
     from swarmpose.tracking.body_tracker import BodyTracker
     from swarmpose.tracking.config import TrackerConfig
-    from swarmpose.tracking.personalise import ShapeSample
 
     out = makehuman_walk(tmp_path_factory, "female-slim", 16)
     source = open_source(str(out))

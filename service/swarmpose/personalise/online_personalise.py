@@ -2,7 +2,7 @@
 
 :class:`PersonalisingTracker` tracks with the shape space's start body, keeps the first N frames
 it tracked (depth and detection; colour is dropped), then fits the shape on them
-(:func:`~swarmpose.tracking.personalise.fit_shape` with its default settings, the last stage of
+(:func:`~swarmpose.personalise.personalise.fit_shape` with its default settings, the last stage of
 own poses included, in the tracking thread: that frame takes the fit's seconds), takes the new body
 and locks it for the rest of the run. Each person of a
 several-people run has a tracker of their own, so each is personalised on their own frames, and
@@ -22,10 +22,10 @@ from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import SwarmposeError
 from swarmpose.detect.joints import Joints2D
 from swarmpose.gpu.context import ClContext
+from swarmpose.personalise.personalise import FitSettings, ShapeSample, body_measures, fit_shape
 from swarmpose.sources.base import Frame
 from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.config import TrackerConfig
-from swarmpose.tracking.personalise import FitSettings, ShapeSample, body_measures, fit_shape
 from swarmpose.tracking.result import BodyResult
 
 log = logging.getLogger(__name__)

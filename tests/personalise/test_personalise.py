@@ -12,7 +12,7 @@ import pytest
 from conftest import MAKEHUMAN, ValidatingSink, makehuman_walk, needs_assets
 
 from swarmpose.body.shape_space import match_volume
-from swarmpose.tracking.personalise import MAX_CORRECTION, bone_energy, debiased_length, spread_frames
+from swarmpose.personalise.personalise import MAX_CORRECTION, bone_energy, debiased_length, spread_frames
 
 
 def test_key_frames_are_spread_over_the_poses():
@@ -115,7 +115,7 @@ def test_the_makehuman_fitting_body_encloses_the_full_bodys_volume():
     """The decimated tracking body encloses about 2 % less than the full mesh; the fitting body
     the same volume (divergence theorem, numpy), with the same bones and points."""
     from swarmpose.body.shape_space import MakeHumanSpace
-    from swarmpose.tracking.personalise import body_measures
+    from swarmpose.personalise.personalise import body_measures
 
     space = MakeHumanSpace(MAKEHUMAN)
     x = space.start
@@ -159,7 +159,7 @@ def test_model_depth_is_the_first_hit_of_each_pixel_ray():
     """The body's rendered depth against a numpy ray-triangle intersection at sampled pixels."""
     from swarmpose.body.loader import load_body
     from swarmpose.core.camera import Intrinsics
-    from swarmpose.tracking.lift_bias import model_depth
+    from swarmpose.personalise.lift_bias import model_depth
 
     body = load_body(f"makehuman:{MAKEHUMAN}", "female").tracking_lod(1500)
     k = Intrinsics(width=160, height=120, fx=140.0, fy=140.0, cx=79.5, cy=59.5)
@@ -183,10 +183,10 @@ def test_lift_bias_on_the_model_is_the_lifts_own_lengthening_on_the_observed_fra
     own noise-free render at the true poses, predicts that difference (within 0.5 cm per limb and
     0.2 cm on average over the limbs: the observation has sensor noise and a room, the model none)."""
     from swarmpose.body.loader import load_body
+    from swarmpose.personalise.lift_bias import LIMB_BONES, lift_bias, typical_depth
     from swarmpose.sources.registry import open_source
     from swarmpose.tracking.body_tracker import observed_depth
     from swarmpose.tracking.lift import lift_keypoints
-    from swarmpose.tracking.lift_bias import LIMB_BONES, lift_bias, typical_depth
 
     body = load_body(f"makehuman:{MAKEHUMAN}", "male-tall")
     truth = [json.loads(line) for line in (tall_walk / "groundtruth.jsonl").read_text().splitlines()]
@@ -221,8 +221,8 @@ def test_the_lifted_joints_lie_farther_in_front_of_a_heavier_bodys_joints():
     least 1 cm farther in front of their joints than the slim body's."""
     from swarmpose.body.loader import load_body
     from swarmpose.core.camera import Intrinsics
+    from swarmpose.personalise.lift_bias import model_depth
     from swarmpose.tracking.lift import lift_keypoints, median_depth
-    from swarmpose.tracking.lift_bias import model_depth
 
     k = Intrinsics(width=320, height=240, fx=285.0, fy=285.0, cx=159.5, cy=119.5)
     names = ("left_hip", "right_hip", "left_shoulder", "right_shoulder")
@@ -249,11 +249,11 @@ def test_a_body_larger_than_the_person_costs_more_where_the_sensor_sees_the_wall
     from swarmpose.body.shape_space import shape_space_for
     from swarmpose.core.camera import Intrinsics
     from swarmpose.gpu.context import ClContext
+    from swarmpose.personalise.lift_bias import model_depth
+    from swarmpose.personalise.personalise import ShapeSample, _KeyFrame
     from swarmpose.sources.base import Frame
     from swarmpose.tracking.body_tracker import BodyTracker
     from swarmpose.tracking.config import TrackerConfig
-    from swarmpose.tracking.lift_bias import model_depth
-    from swarmpose.tracking.personalise import ShapeSample, _KeyFrame
 
     space = shape_space_for(f"makehuman:{MAKEHUMAN}", None, 1500)
     slim, heavy = (space.clip(np.array([1.0, 1.0, 0.5, w, 0.5])) for w in (0.0, 1.0))
@@ -279,8 +279,8 @@ def test_personalize_recovers_a_tall_subjects_height_and_writes_a_body_that_load
     as --body with its parameters."""
     from swarmpose.body.loader import load_body
     from swarmpose.cli.main import main
-    from swarmpose.tracking.personalise import body_measures
-    from swarmpose.tracking.shape_stature import BAND
+    from swarmpose.personalise.personalise import body_measures
+    from swarmpose.personalise.shape_stature import BAND
 
     glb = tmp_path / "me.glb"
     code = main(["personalize", str(tall_walk), "--body", f"makehuman:{MAKEHUMAN}", "--frames", "16",
@@ -461,9 +461,9 @@ def test_a_failed_fit_is_reported_valid_and_a_new_person_starts_again_from_the_s
     from swarmpose.body.shape_space import MakeHumanSpace
     from swarmpose.core.camera import Intrinsics
     from swarmpose.messages import validate
+    from swarmpose.personalise.online_personalise import PersonalisingTracker
     from swarmpose.pipeline.status import WorkerStats, status_message
     from swarmpose.tracking.config import TrackerConfig
-    from swarmpose.tracking.online_personalise import PersonalisingTracker
 
     space = MakeHumanSpace(MAKEHUMAN)
     tracker = PersonalisingTracker(space, 3, Intrinsics(320, 240, 280.0, 280.0, 160.0, 120.0),
@@ -497,9 +497,9 @@ def test_with_other_people_in_view_a_frame_whose_person_is_half_hidden_is_not_co
 
     from swarmpose.body.shape_space import MakeHumanSpace
     from swarmpose.detect.registry import make_detector
+    from swarmpose.personalise.online_personalise import MAX_HIDDEN_SHARE, PersonalisingTracker
     from swarmpose.sources.registry import open_source
     from swarmpose.tracking.config import TrackerConfig
-    from swarmpose.tracking.online_personalise import MAX_HIDDEN_SHARE, PersonalisingTracker
 
     source = open_source(str(tall_walk))
     frames = list(source)

@@ -1,0 +1,1 @@
+"""Fitting the body to the person: the automatic height and personalisation of the shape."""
