@@ -10,7 +10,7 @@ from conftest import ValidatingSink
 
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import ANGLE_NAMES, EVAL_JOINTS
-from swarmpose.personalise.auto_height import ESTIMATES, FACTOR_LIMITS, HeightFittingTracker, applies, scaled_body
+from swarmpose.personalise.auto_height import ESTIMATES, FACTOR_LIMITS, applies, height_fitting_tracker, scaled_body
 from swarmpose.tracking.config import TrackerConfig
 
 FACING = (0.0, 1.0, 0.0, 0.0)  # upright, facing the camera (OpenCV axes: y down)
@@ -68,15 +68,15 @@ def test_a_tracker_finds_a_short_subjects_height_and_tracks_better_for_it(tmp_pa
     source = open_source(str(seq))
     frames = list(source)
     detector = make_detector("simulated", source)
-    tracker = HeightFittingTracker(load_body("builtin"), frames[0].intrinsics,  # full resolution: it decimates
-                                   TrackerConfig(particles=32, generations=32, max_people=1))
+    tracker = height_fitting_tracker(load_body("builtin"), frames[0].intrinsics,  # full resolution: it decimates
+                                     TrackerConfig(particles=32, generations=32, max_people=1))
     for frame in frames:
         tracker.step(frame, detector.detect(frame))
     state = tracker.personalisation()
     assert state["state"] == "locked", state
     assert state["height_m"] == pytest.approx(1.55, abs=0.03), state
-    assert len(tracker.factors) == ESTIMATES  # the walk stands upright throughout
-    assert FACTOR_LIMITS[0] <= tracker.factor <= FACTOR_LIMITS[1]
+    assert len(tracker.fitting.factors) == ESTIMATES  # the walk stands upright throughout
+    assert FACTOR_LIMITS[0] <= tracker.fitting.factor <= FACTOR_LIMITS[1]
     tracker.new_person()  # another person: the given body again
     assert tracker.personalisation()["state"] == "collecting"
     assert tracker.body.height == pytest.approx(1.75, abs=0.01)

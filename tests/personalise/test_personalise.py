@@ -461,14 +461,14 @@ def test_a_failed_fit_is_reported_valid_and_a_new_person_starts_again_from_the_s
     from swarmpose.body.shape_space import MakeHumanSpace
     from swarmpose.core.camera import Intrinsics
     from swarmpose.messages import validate
-    from swarmpose.personalise.online_personalise import PersonalisingTracker
+    from swarmpose.personalise.online_personalise import personalising_tracker
     from swarmpose.pipeline.status import WorkerStats, status_message
     from swarmpose.tracking.config import TrackerConfig
 
     space = MakeHumanSpace(MAKEHUMAN)
-    tracker = PersonalisingTracker(space, 3, Intrinsics(320, 240, 280.0, 280.0, 160.0, 120.0),
-                                   TrackerConfig(personalize=3, particles=8, generations=8), body_id=4)
-    tracker._personalise()  # no samples at all
+    tracker = personalising_tracker(space, 3, Intrinsics(320, 240, 280.0, 280.0, 160.0, 120.0),
+                                    TrackerConfig(personalize=3, particles=8, generations=8), body_id=4)
+    tracker.fitting.personalise(tracker)  # no samples at all
     state = tracker.personalisation()
     assert state["state"] == "failed" and "0 of 0 frames" in state["reason"] and state["id"] == 4
     stats = WorkerStats()
@@ -478,7 +478,7 @@ def test_a_failed_fit_is_reported_valid_and_a_new_person_starts_again_from_the_s
 
     heavy = space.tracking_body(PRESET_MACROS["male-heavy"].vector())
     tracker.set_body(heavy)
-    tracker.state = "locked"
+    tracker.fitting.state = "locked"
     tracker.new_person()
     assert tracker.personalisation() == {"id": 4, "state": "collecting", "frames": 0, "needed": 3}
     np.testing.assert_allclose(tracker.body.vertices, space.tracking_body(space.start).vertices)
@@ -497,7 +497,7 @@ def test_with_other_people_in_view_a_frame_whose_person_is_half_hidden_is_not_co
 
     from swarmpose.body.shape_space import MakeHumanSpace
     from swarmpose.detect.registry import make_detector
-    from swarmpose.personalise.online_personalise import MAX_HIDDEN_SHARE, PersonalisingTracker
+    from swarmpose.personalise.online_personalise import MAX_HIDDEN_SHARE, hidden_share, personalising_tracker
     from swarmpose.sources.registry import open_source
     from swarmpose.tracking.config import TrackerConfig
 
@@ -507,10 +507,10 @@ def test_with_other_people_in_view_a_frame_whose_person_is_half_hidden_is_not_co
     joints = [detector.detect(f) for f in frames[:3]]
     source.close()
     truth = [json.loads(line) for line in (tall_walk / "groundtruth.jsonl").read_text().splitlines()]
-    tracker = PersonalisingTracker(MakeHumanSpace(MAKEHUMAN), 100, frames[0].intrinsics,
-                                   TrackerConfig(personalize=100, particles=16, generations=16, max_people=1))
+    tracker = personalising_tracker(MakeHumanSpace(MAKEHUMAN), 100, frames[0].intrinsics,
+                                    TrackerConfig(personalize=100, particles=16, generations=16, max_people=1))
     tracker.step(frames[0], joints[0], others_removed=True)
-    assert len(tracker.samples) == 1  # the whole person in view
+    assert len(tracker.fitting.samples) == 1  # the whole person in view
 
     frame, t = frames[1], truth[1]
     xy = np.array([p for p in t["joints2d"].values() if p is not None])
@@ -526,14 +526,14 @@ def test_with_other_people_in_view_a_frame_whose_person_is_half_hidden_is_not_co
     expected = removed.sum() / person.sum()
     half = replace(frame, depth=np.where(removed, 0.0, depth).astype(np.float32))
     tracker.step(half, joints[1], others_removed=True)
-    share = tracker.hidden_share()
+    share = hidden_share(tracker)
     assert abs(share - expected) < 0.1, (share, expected)
-    assert share > MAX_HIDDEN_SHARE and len(tracker.samples) == 1
+    assert share > MAX_HIDDEN_SHARE and len(tracker.fitting.samples) == 1
     tracker.step(half, joints[1], others_removed=False)  # one person in view: no check
-    assert len(tracker.samples) == 2
+    assert len(tracker.fitting.samples) == 2
     tracker.step(frames[2], joints[2], others_removed=True)
-    assert tracker.hidden_share() < MAX_HIDDEN_SHARE and len(tracker.samples) == 3
-    joints_only = PersonalisingTracker(MakeHumanSpace(MAKEHUMAN), 100, frames[0].intrinsics,
-                                       TrackerConfig(mode="joints", personalize=100, particles=16, generations=16))
+    assert hidden_share(tracker) < MAX_HIDDEN_SHARE and len(tracker.fitting.samples) == 3
+    joints_only = personalising_tracker(MakeHumanSpace(MAKEHUMAN), 100, frames[0].intrinsics,
+                                        TrackerConfig(mode="joints", personalize=100, particles=16, generations=16))
     joints_only.step(half, joints[1], others_removed=True)  # scores no depth: nothing to judge hiding by
-    assert len(joints_only.samples) == 1
+    assert len(joints_only.fitting.samples) == 1

@@ -209,20 +209,21 @@ def test_each_id_is_refit_on_the_steps_whose_fit_it_published():
 def test_a_step_keeps_the_body_its_tracker_had_then(wave_sequence):
     """A retired person's tracker goes back to its start body (``new_person``) before the window's
     backward pass: the step recorded the scaled body the person was tracked with."""
-    from swarmpose.personalise.auto_height import HeightFittingTracker, scaled_body
+    from swarmpose.personalise.auto_height import height_fitting_tracker, scaled_body
 
     source = open_source(f"folder:{wave_sequence}")
     frame = next(iter(source))
     source.close()
-    tracker = HeightFittingTracker(load_body("builtin"), frame.intrinsics, TrackerConfig(particles=8, generations=4))
-    tracker.factor = 1.1  # as its height measure does
-    tracker.set_body(scaled_body(tracker.given_body, tracker.factor))
+    tracker = height_fitting_tracker(load_body("builtin"), frame.intrinsics, TrackerConfig(particles=8, generations=4))
+    fitting = tracker.fitting
+    fitting.factor = 1.1  # as its height measure does
+    tracker.set_body(scaled_body(fitting.given_body, fitting.factor))
     held = BackwardPass(5)
     held.record(tracker, frame, None, False)
     tracked_with = tracker.body
     tracker.new_person()
-    assert tracker.body is tracker.given_body and held.steps[0].body is tracked_with
-    assert held.steps[0].body.height == pytest.approx(1.1 * tracker.given_body.height, rel=1e-6)
+    assert tracker.body is fitting.given_body and held.steps[0].body is tracked_with
+    assert held.steps[0].body.height == pytest.approx(1.1 * fitting.given_body.height, rel=1e-6)
 
 
 @pytest.mark.slow

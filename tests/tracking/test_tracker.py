@@ -204,7 +204,7 @@ def test_a_turned_solution_replaces_the_track_only_when_it_wins_twice():
 
 
 def test_rechecks_are_due_every_n_frames_and_on_a_young_tracks_first_frames():
-    from swarmpose.tracking.body_tracker import recheck_due
+    from swarmpose.tracking.facings import recheck_due
 
     due = [k for k in range(1, 31) if recheck_due(100 + k, k, 10)]
     assert due == [1, 2, 4, 10, 20, 30]

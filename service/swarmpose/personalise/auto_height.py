@@ -27,7 +27,7 @@ grown by :data:`GROW_DOWN_UP` of its pixel height up and down and :data:`GROW_SI
 median depth: a wall farther behind the person than that is left out. Only the window of the
 model's projection grown by those margins is ray-cast and searched (:func:`_window`).
 
-**The body** (:class:`HeightFittingTracker`): the median of the first :data:`FIRST_ESTIMATES`
+**The body** (:class:`HeightFitting`, a tracker's fitting): the median of the first :data:`FIRST_ESTIMATES`
 upright frames' statures scales the body uniformly about its origin (:func:`scaled_body`; for
 the built-in body exactly its stature parameter, for a MakeHuman body its size at unchanged
 proportions); the median of the first :data:`ESTIMATES` scales it once more, and it is then
@@ -38,7 +38,7 @@ Limits: a person jumping (jumping jacks) is measured in the air as well; MakeHum
 come out up to about 2 % short (the top of their heads against their stature differs from the
 built-in body's, on which :data:`UPRIGHT_SHARE` is calibrated); a single-person tracker
 (``--max-people 1``) cannot tell another person from a lost track, so the height stays the first
-person's (:meth:`HeightFittingTracker.new_person` starts again; several people's trackers call
+person's (:meth:`HeightFitting.new_person` starts again; several people's trackers call
 it for every new id).
 """
 
@@ -94,64 +94,71 @@ def scaled_body(body: SkinnedBody, factor: float) -> SkinnedBody:
                    metadata={**body.metadata, "height_scale": float(factor)})
 
 
-class HeightFittingTracker(BodyTracker):
-    """A :class:`BodyTracker` that scales its body to the person's height on the first upright
-    frames it tracks: at once after :data:`FIRST_ESTIMATES` of them, finally after
-    :data:`ESTIMATES`, then keeps it (see the module docstring).
+class HeightFitting:
+    """A tracker's :class:`~swarmpose.tracking.fitting.BodyFitting` that scales its body to the
+    person's height on the first upright frames it tracks: at once after :data:`FIRST_ESTIMATES`
+    of them, finally after :data:`ESTIMATES`, then keeps it (see the module docstring).
 
     ``factors``: each measured frame's stature over the given body's; ``factor``: the scale
-    applied now (1 at first); ``locked`` after :data:`ESTIMATES`; :meth:`personalisation`
-    reports them as status and info do."""
+    applied now (1 at first); ``locked`` after :data:`ESTIMATES`; ``given_body``: the tracker's
+    body when attached; :meth:`personalisation` reports them as status and info do."""
 
-    def __init__(self, body: SkinnedBody, intrinsics: Intrinsics, config: TrackerConfig | None = None,
-                 context: ClContext | None = None, body_id: int = 0):
-        super().__init__(body, intrinsics, config, context, body_id)
-        self.given_body = self.body  # the tracking level of detail BodyTracker made of ``body``
+    def __init__(self) -> None:
+        self.given_body: SkinnedBody | None = None
         self.factors: list[float] = []
         self.factor = 1.0
         self.locked = False
 
-    def new_person(self) -> None:
+    def attach(self, tracker: BodyTracker) -> None:
+        """Remember the tracker's body (its tracking level of detail) as the one to scale."""
+        self.given_body = tracker.body
+
+    def new_person(self, tracker: BodyTracker) -> None:
         """Another person: the given body again, and a new measure."""
-        super().new_person()
         if self.factor != 1.0:
-            self.set_body(self.given_body)
+            tracker.set_body(self.given_body)
         self.factors, self.factor, self.locked = [], 1.0, False
 
-    def step(self, frame: Frame, joints: Joints2D | None, others_removed: bool = False,
-             start_min_score: float | None = None) -> BodyResult:
-        result = super().step(frame, joints, others_removed, start_min_score)
+    def after_frame(self, tracker: BodyTracker, frame: Frame, joints: Joints2D | None, others_removed: bool,
+                    result: BodyResult) -> None:
+        """Measure the person's stature on this frame where it is upright; rescale after enough."""
         found = result.found
-        if not self.locked and found.state != "lost" and found.pose is not None:
-            targets = self.objective.targets if self.objective is not None else None
-            try:
-                stature = (None if targets is None else
-                           upright_stature(self.body, found.pose, observed_depth(frame.depth), self.intrinsics,
-                                           targets.names, targets.xyz))
-            except Exception as exc:  # a failed measure must not cost the frame its fit
-                log.debug("frame %d: body %d: no height measure (%s: %s)", frame.index, self.body_id,
-                          type(exc).__name__, exc)
-                stature = None
-            if stature is not None and np.isfinite(stature):
-                self.factors.append(stature / self.given_body.height)
-                if len(self.factors) in (FIRST_ESTIMATES, ESTIMATES):
-                    self._rescale()
-        return result
+        if self.locked or found.state == "lost" or found.pose is None:
+            return
+        targets = tracker.objective.targets if tracker.objective is not None else None
+        try:
+            stature = (None if targets is None else
+                       upright_stature(tracker.body, found.pose, observed_depth(frame.depth), tracker.intrinsics,
+                                       targets.names, targets.xyz))
+        except Exception as exc:  # a failed measure must not cost the frame its fit
+            log.debug("frame %d: body %d: no height measure (%s: %s)", frame.index, tracker.body_id,
+                      type(exc).__name__, exc)
+            stature = None
+        if stature is not None and np.isfinite(stature):
+            self.factors.append(stature / self.given_body.height)
+            if len(self.factors) in (FIRST_ESTIMATES, ESTIMATES):
+                self._rescale(tracker)
 
-    def _rescale(self) -> None:
+    def _rescale(self, tracker: BodyTracker) -> None:
         """Scale the given body by the median factor so far (clamped); lock it after :data:`ESTIMATES`."""
         self.factor = float(np.clip(np.median(self.factors), *FACTOR_LIMITS))
-        self.set_body(scaled_body(self.given_body, self.factor))
+        tracker.set_body(scaled_body(self.given_body, self.factor))
         self.locked = len(self.factors) >= ESTIMATES
         log.log(logging.INFO if self.locked else logging.DEBUG,
                 "body %d: height %.3f m from the depth of %d upright frames (the body scaled by %.3f)%s",
-                self.body_id, self.body.height, len(self.factors), self.factor,
+                tracker.body_id, tracker.body.height, len(self.factors), self.factor,
                 "" if self.locked else "; measuring on")
 
-    def personalisation(self) -> dict:
+    def personalisation(self, tracker: BodyTracker) -> dict:
         """This body's state as the status and info messages' ``personalisation`` reports it:
         ``collecting`` its :data:`ESTIMATES` upright frames (``frames`` so far), then ``locked``;
         ``parameters``: the ``scale`` applied to the given body; ``height_m``: the body's now."""
-        return {"id": self.body_id, "state": "locked" if self.locked else "collecting",
+        return {"id": tracker.body_id, "state": "locked" if self.locked else "collecting",
                 "frames": min(len(self.factors), ESTIMATES), "needed": ESTIMATES,
-                "parameters": {"scale": round(self.factor, 4)}, "height_m": round(self.body.height, 4)}
+                "parameters": {"scale": round(self.factor, 4)}, "height_m": round(tracker.body.height, 4)}
+
+
+def height_fitting_tracker(body: SkinnedBody, intrinsics: Intrinsics, config: TrackerConfig | None = None,
+                           context: ClContext | None = None, body_id: int = 0) -> BodyTracker:
+    """A :class:`BodyTracker` of ``body`` whose :class:`HeightFitting` scales it to the person."""
+    return BodyTracker(body, intrinsics, config, context, body_id, fitting=HeightFitting())

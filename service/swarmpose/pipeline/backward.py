@@ -39,7 +39,7 @@ log = logging.getLogger(__name__)
 
 SETTLED_AGE = 8
 """The backward tracker starts as a track this many frames old: past the young re-checks of the
-facing (:data:`~swarmpose.tracking.body_tracker.YOUNG_RECHECKS`), which exist for a start's doubtful
+facing (:data:`~swarmpose.tracking.facings.YOUNG_RECHECKS`), which exist for a start's doubtful
 facing, not for a converged one."""
 
 

@@ -19,8 +19,8 @@ from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError
 from swarmpose.detect.joints import Detector
 from swarmpose.personalise.auto_height import ESTIMATES as HEIGHT_ESTIMATES
-from swarmpose.personalise.auto_height import HeightFittingTracker, applies
-from swarmpose.personalise.online_personalise import PersonalisingTracker
+from swarmpose.personalise.auto_height import applies, height_fitting_tracker
+from swarmpose.personalise.online_personalise import personalising_tracker
 from swarmpose.pipeline.ensemble import EnsemblePipeline, ensemble_of
 from swarmpose.pipeline.features import refuse
 from swarmpose.pipeline.step import FramePipeline
@@ -44,11 +44,11 @@ def body_fitting(body: SkinnedBody, tracker: TrackerConfig, body_spec: str, shap
                               "makehuman:DIR, given by name)")
 
         def personalising(settings: TrackerConfig, intrinsics: Intrinsics, body_id: int) -> BodyTracker:
-            return PersonalisingTracker(space, tracker.personalize, intrinsics, settings, body_id=body_id)
+            return personalising_tracker(space, tracker.personalize, intrinsics, settings, body_id=body_id)
         return personalising, tracker.personalize
     if body_spec and applies(body_spec, shape, tracker):
         def height_fitting(settings: TrackerConfig, intrinsics: Intrinsics, body_id: int) -> BodyTracker:
-            return HeightFittingTracker(body, intrinsics, settings, body_id=body_id)
+            return height_fitting_tracker(body, intrinsics, settings, body_id=body_id)
         return height_fitting, HEIGHT_ESTIMATES
 
     def plain(settings: TrackerConfig, intrinsics: Intrinsics, body_id: int) -> BodyTracker:

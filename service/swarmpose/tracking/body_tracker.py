@@ -50,12 +50,14 @@ from swarmpose.sources.base import Frame
 from swarmpose.tracking import search, verdict
 from swarmpose.tracking.arm_proposals import arm_proposals
 from swarmpose.tracking.body_scene import body_scene
-from swarmpose.tracking.budget import POLISH_CANDIDATES, FrameBudget, lean_frame, start_budget
-from swarmpose.tracking.config import MODE_WEIGHTS, TrackerConfig
+from swarmpose.tracking.budget import POLISH_CANDIDATES, FrameBudget, lean_frame
+from swarmpose.tracking.config import TrackerConfig
+from swarmpose.tracking.facings import YOUNG_RECHECKS, fit_facings, recheck_facings
+from swarmpose.tracking.fitting import BodyFitting
 from swarmpose.tracking.hidden_lifts import without_hidden_lifts
 from swarmpose.tracking.history import TrackHistory
 from swarmpose.tracking.hypotheses import MERGE_SHARE, hypothesis_groups
-from swarmpose.tracking.init_pose import FACINGS_DEG, NO_TORSO, torso_pose, turned
+from swarmpose.tracking.init_pose import NO_TORSO, torso_pose
 from swarmpose.tracking.lift import lifted_body
 from swarmpose.tracking.limb_flips import limb_flips
 from swarmpose.tracking.objective import JointTargets, Objective, search_split
@@ -74,19 +76,6 @@ behind) flipped tracks either way: kept as seeds, the old poses won back a mirro
 accepted at once, a mirrored re-check replaced a right track."""
 
 
-YOUNG_RECHECKS = (1, 2, 4)
-"""Track ages (frames after the start) at which the start's facings are refitted too, besides
-every ``config.recheck`` frames: the start's pick rests on one frame's detection, and a
-detector that swapped sides on that frame (people seen from behind) locked the track in the
-mirrored facing until the next re-check."""
-
-
-def recheck_due(index: int, age: int, every: int) -> bool:
-    """Whether frame ``index`` of a track ``age`` frames old (1 = the first after its start)
-    re-checks the facings: every ``every`` frames and at :data:`YOUNG_RECHECKS` (0: never)."""
-    return bool(every) and (index % every == 0 or age in YOUNG_RECHECKS)
-
-
 def observed_depth(depth: np.ndarray) -> np.ndarray:
     """Depth (H, W) as float32 m, every invalid reading (NaN, inf, <= 0) set to 0 (no measurement)."""
     depth = np.asarray(depth, dtype=np.float32)
@@ -102,7 +91,7 @@ class BodyTracker:
     """
 
     def __init__(self, body: SkinnedBody, intrinsics: Intrinsics, config: TrackerConfig | None = None,
-                 context: ClContext | None = None, body_id: int = 0):
+                 context: ClContext | None = None, body_id: int = 0, fitting: BodyFitting | None = None):
         config = config or TrackerConfig()
         self.config, self.intrinsics, self.body_id = config, intrinsics, body_id
         self.body = body if len(body.triangles) <= config.triangles else body.tracking_lod(config.triangles)
@@ -126,6 +115,10 @@ class BodyTracker:
         self.frame_period_s: float | None = None  # the camera's (s): dropped frames widen the search (None: none)
         self.budget_ms = 0.0  # the time a frame may take (ms, live: tracking.budget); 0: the configured search
         self.costs = FrameBudget()
+        self.fitting = fitting
+        """What fits the body to the person as they are tracked (None: the body as given)."""
+        if fitting is not None:
+            fitting.attach(self)
 
     @property
     def device_name(self) -> str:
@@ -153,12 +146,14 @@ class BodyTracker:
                               context=context)
 
     def personalisation(self) -> dict | None:
-        """This body's ``--personalize`` state (see ``PersonalisingTracker``); None: not personalising."""
-        return None
+        """The state of the body's fitting to the person (:attr:`fitting`); None: none."""
+        return None if self.fitting is None else self.fitting.personalisation(self)
 
     def new_person(self) -> None:
         """Track another person from the next frame (a tracker reused for a new id)."""
         self.reset()
+        if self.fitting is not None:
+            self.fitting.new_person(self)
 
     def reset(self) -> None:
         """Forget the track: the next frame initialises from its detection."""
@@ -188,10 +183,21 @@ class BodyTracker:
         """Track one frame with its detection (None: no detector output for it). others_removed:
         other people's pixels were taken out of ``frame.depth`` (several people), so the lost
         test's depth agreement counts only the model's pixels that have an observation.
-        start_min_score: the least keypoint score at a track's start (None: ``config.min_score``)."""
-        t0 = time.perf_counter()
+        start_min_score: the least keypoint score at a track's start (None: ``config.min_score``).
+
+        Three steps: the input kept for the offline backward pass (:attr:`on_step`), the frame's
+        fit (:meth:`fit_frame`), and the body's fitting to the person from its result (:attr:`fitting`)."""
         if self.on_step is not None:
             self.on_step(self, frame, joints, others_removed)
+        result = self.fit_frame(frame, joints, others_removed, start_min_score)
+        if self.fitting is not None:
+            self.fitting.after_frame(self, frame, joints, others_removed, result)
+        return result
+
+    def fit_frame(self, frame: Frame, joints: Joints2D | None, others_removed: bool = False,
+                  start_min_score: float | None = None) -> BodyResult:
+        """The pose of one frame (see the module docstring and :meth:`step` for the arguments)."""
+        t0 = time.perf_counter()
         depth = np.asarray(frame.depth, dtype=np.float32)
         if depth.shape != (self.intrinsics.height, self.intrinsics.width):
             raise TrackingError(f"frame {frame.index}: depth is {depth.shape[1]}x{depth.shape[0]}, the tracker's "
@@ -219,38 +225,14 @@ class BodyTracker:
         timings: dict[str, float] = {}
         proposals: list[np.ndarray] = []  # limb flips and arm proposals (tracking only)
         if state == "init":
-            seeds = self._initialise(centre, targets, depth, rng, timings)
+            seeds = fit_facings(self, centre, targets, depth, rng, timings)
             centre = seeds[0]
             box = self.search_box(centre, targets)
             start = search.spread(centre, pso.particles, rng, np.full(3, 0.04), 0.1, 0.15)
-        else:
+        else:  # the track's last pose, its motion, the re-checked facings and the proposals
             centre = self.previous
-            hidden = self.config.hidden_lifts and self.config.mode != "depth"  # depth mode: no joint term
-            lean = lean_frame(self.budget_ms, pso.generations)  # live, a starved search: no proposals
-            arms = self.config.arm_proposals and self.config.mode != "joints" and not lean  # the depth judges them
-            with timed(timings, "scene"):
-                scene = body_scene(self.body, centre) if hidden or arms else None  # one posed body for both
-            if hidden:
-                with timed(timings, "hidden"):
-                    targets = without_hidden_lifts(self.body, centre, targets, self.intrinsics, scene)
-            recheck = self._recheck(frame.index, lifted, targets, depth, rng, timings, pso.generations)
-            torso = torso_pose(self.body, lifted, centre[7:], upright=False)
-            offset = np.abs(torso[:3] - centre[:3]) if torso is not None else np.zeros(3)
-            radius = search.angle_radius(self.body, self.intrinsics, centre, targets)
-            ahead = self.history.periods_since(frame.timestamp_ns, self.frame_period_s)  # > 1: frames dropped
-            start = search.spread(centre, pso.particles, rng, 0.04 * np.sqrt(ahead) + offset, 0.15, radius)
-            seeds = ([centre] + self.history.predicted(frame.timestamp_ns, ahead)
-                     + ([self.challenger] if self.challenger is not None else [])
-                     + self.history.newest_first() + ([torso] if torso is not None else []) + recheck)
-            box = self.search_box(centre, targets)
-            room = pso.particles - len(seeds)
-            if arms and room > 0:  # as many as the swarm has room for
-                with timed(timings, "arms"):
-                    proposals += arm_proposals(self.body, centre, depth, self.intrinsics, box, scene)[:room]
-                room = pso.particles - len(seeds) - len(proposals)
-            if self.config.limb_flips and room > 0 and not lean:
-                with timed(timings, "flips"):
-                    proposals += limb_flips(self.body, centre, most=room)
+            targets, start, seeds, proposals, box, radius = self._tracking_start(frame, lifted, targets, depth, rng,
+                                                                                 timings, pso)
         for i, s in enumerate((seeds + proposals)[:pso.particles]):
             start[i] = s
         t1 = time.perf_counter()
@@ -261,13 +243,19 @@ class BodyTracker:
                 groups = hypothesis_groups(self.objective, proposals, start, self.config.hypotheses, radius, rng,
                                            keep=len(seeds))
         self.objective.take_spent()
-        result = self._search(self.objective, start, rng, pso, groups)
+        result = self.pso_search(self.objective, start, rng, pso, groups)
         timings["pso"] = 1000 * (time.perf_counter() - t1) - timings.get("hypotheses", 0.0)
         timings.update(search_split(self.objective.take_spent(), timings["pso"]))
         duel = self.age < max(YOUNG_RECHECKS) and self.previous is not None  # a young track: both facings polished
         with timed(timings, "polish"):  # polish 0: as it is
             best = polish_solution(self.objective, result, self.previous, self.polish_rounds, rng, duel,
                                    self._hold_facing, REPLACED_TURN_DEG)
+        return self._judge(frame, joints, targets, state, best, result.evaluations, duel, others_removed, timings, t0)
+
+    def _judge(self, frame: Frame, joints: Joints2D | None, targets: JointTargets, state: str, best: np.ndarray,
+               evaluations: int, duel: bool, others_removed: bool, timings: dict[str, float], t0: float) -> BodyResult:
+        """The frame's verdict on ``best`` (36,): lost or not, the track's state after it, the joints and
+        their confidence, the cost model fed (``evaluations`` scored poses), the published result."""
         t_verdict = time.perf_counter()
         self.objective(best[None])
         parts = {k: float(v[0]) for k, v in self.objective.last_parts.items()}
@@ -288,11 +276,47 @@ class BodyTracker:
         timings["total"] = 1000 * (time.perf_counter() - t0)
         if state == "tracking":
             polished = POLISH_CANDIDATES * self.polish_rounds * (1 + duel)
-            self.costs.record(timings["pso"] + timings["polish"], result.evaluations + polished, timings["total"])
-        result = BodyResult(self.body_id, out_state, reason, best, joints3d, joints2d, conf, parts, timings, joints)
+            self.costs.record(timings["pso"] + timings["polish"], evaluations + polished, timings["total"])
+        out = BodyResult(self.body_id, out_state, reason, best, joints3d, joints2d, conf, parts, timings, joints)
         if self.filter is None or out_state == "lost":
-            return result
-        return self._filtered(result, frame.timestamp_ns * 1e-9)
+            return out
+        return self._filtered(out, frame.timestamp_ns * 1e-9)
+
+    def _tracking_start(self, frame: Frame, lifted: dict[str, np.ndarray], targets: JointTargets, depth: np.ndarray,
+                        rng: np.random.Generator, timings: dict[str, float], pso: PsoConfig) -> tuple:
+        """A tracked frame's swarm start around the last pose: (targets less the lifts the body hides,
+        start (P, 36), seeds, proposals, box, angle radius). Seeds: the last pose, where its motion
+        leads, the challenger, the history, the J^e torso and the re-checked facings; proposals: arms
+        sent to unexplained depth and limbs mirrored in depth, as many as the swarm has room for."""
+        centre = self.previous
+        proposals: list[np.ndarray] = []
+        hidden = self.config.hidden_lifts and self.config.mode != "depth"  # depth mode: no joint term
+        lean = lean_frame(self.budget_ms, pso.generations)  # live, a starved search: no proposals
+        arms = self.config.arm_proposals and self.config.mode != "joints" and not lean  # the depth judges them
+        with timed(timings, "scene"):
+            scene = body_scene(self.body, centre) if hidden or arms else None  # one posed body for both
+        if hidden:
+            with timed(timings, "hidden"):
+                targets = without_hidden_lifts(self.body, centre, targets, self.intrinsics, scene)
+        recheck = recheck_facings(self, frame.index, lifted, targets, depth, rng, timings, pso.generations)
+        torso = torso_pose(self.body, lifted, centre[7:], upright=False)
+        offset = np.abs(torso[:3] - centre[:3]) if torso is not None else np.zeros(3)
+        radius = search.angle_radius(self.body, self.intrinsics, centre, targets)
+        ahead = self.history.periods_since(frame.timestamp_ns, self.frame_period_s)  # > 1: frames dropped
+        start = search.spread(centre, pso.particles, rng, 0.04 * np.sqrt(ahead) + offset, 0.15, radius)
+        seeds = ([centre] + self.history.predicted(frame.timestamp_ns, ahead)
+                 + ([self.challenger] if self.challenger is not None else [])
+                 + self.history.newest_first() + ([torso] if torso is not None else []) + recheck)
+        box = self.search_box(centre, targets)
+        room = pso.particles - len(seeds)
+        if arms and room > 0:  # as many as the swarm has room for
+            with timed(timings, "arms"):
+                proposals += arm_proposals(self.body, centre, depth, self.intrinsics, box, scene)[:room]
+            room = pso.particles - len(seeds) - len(proposals)
+        if self.config.limb_flips and room > 0 and not lean:
+            with timed(timings, "flips"):
+                proposals += limb_flips(self.body, centre, most=room)
+        return targets, start, seeds, proposals, box, radius
 
     def _hold_facing(self, result: PsoResult) -> np.ndarray:
         """The frame's solution from the search's ``result``: its best, unless that is turned
@@ -327,74 +351,7 @@ class BodyTracker:
         self.reset()
         return lost_body(reason, self.body_id, {"total": 1000 * (time.perf_counter() - t0)}, joints)
 
-    def _initialise(self, centre: np.ndarray, targets: JointTargets, depth: np.ndarray, rng: np.random.Generator,
-                    timings: dict[str, float], generations: int | None = None) -> list[np.ndarray]:
-        """Start poses for a frame without a track, best first.
-
-        A side or back view makes the facing of the lifted torso unreliable (the far shoulder
-        and hip lift onto the near side), so the start tries the J^e torso pose turned to each
-        of :data:`FACINGS_DEG`. From each, two PSOs over wide angle ranges: first of the joint
-        term alone (no rendering; the limbs find their detections), then of the full objective
-        (with the joint term on also in depth mode) from there. The fits are ranked by that
-        objective, so depth and the face's keypoints decide between a facing and its mirror.
-        *Design change:* one PSO of the full objective from the rest angles left the limbs
-        unfitted from a side view (the depth term is nearly flat in them, and dominates E):
-        the true pose scored 17 units below every facing's fit.
-        """
-        if targets.count == 0:
-            return [centre]
-        t = time.perf_counter()
-        w_d, w_j = MODE_WEIGHTS["hybrid"]  # depth mode: the joints weigh as much as in hybrid
-        weights = replace(self.weights, joints=max(self.weights.joints, self.weights.depth * w_j / w_d))
-        box = self.search_box(centre, targets)
-        joint_objective = None
-        if weights.depth > 0 and bool(np.any(depth > 0)):
-            joint_objective = Objective(self.body, self.intrinsics, self.objective.scorer,
-                                        replace(weights, depth=0.0, joints=1.0))
-            joint_objective.set_targets(targets)
-        start_objective = (self.objective if weights == self.weights
-                           else Objective(self.body, self.intrinsics, self.objective.scorer, weights,
-                                          self.objective.coarse))
-        start_objective.set_frame(depth, box, targets, centre)
-        # the start runs once per track, so it gets at least config.start_budget (a smaller one left a side
-        # view's start unconverged); live, a start that keeps up
-        first = generations is None
-        particles, budget = start_budget(self.config.start_budget, self.budget_ms, self.config.particles,
-                                         self.config.generations)
-        if not first:  # a re-check: the frame's generations; live, the start's particles
-            particles, budget = (particles if self.budget_ms > 0 else self.config.particles), generations
-        # joints only (no depth): the joint stage is the whole fit, at twice the generations
-        pso = replace(self.config.pso_config, variant="perturbed",
-                      generations=budget * (1 if joint_objective is not None else 2), particles=particles)
-        fits = []
-        for degrees in FACINGS_DEG:
-            facing = turned(self.body, centre, degrees)
-            start = search.spread(facing, pso.particles, rng, np.full(3, 0.08), 0.3, 1.0)
-            start[0] = facing
-            fit = self._search(joint_objective or start_objective, start, rng, pso).best
-            if joint_objective is not None:
-                start = search.spread(fit, pso.particles, rng, np.full(3, 0.04), 0.1, 0.3)
-                start[0] = fit
-                fit = self._search(start_objective, start, rng, pso).best
-            fits.append(fit)
-        energy = start_objective(np.stack(fits))
-        timings["init" if first else "recheck"] = 1000 * (time.perf_counter() - t)
-        return [fits[k] for k in np.argsort(energy)]
-
-    def _recheck(self, index: int, lifted: dict[str, np.ndarray], targets: JointTargets, depth: np.ndarray,
-                 rng: np.random.Generator, timings: dict[str, float], generations: int) -> list[np.ndarray]:
-        """Every ``config.recheck`` frames and on a young track's :data:`YOUNG_RECHECKS` frames,
-        the start's facings refitted from the detection on a quarter of the frame's ``generations``:
-        they join the swarm as particles, so a track locked in a wrong facing or limb configuration is
-        replaced as soon as they explain the frame better."""
-        if not recheck_due(index, self.age + 1, self.config.recheck) or targets.count == 0:  # this frame's age
-            return []
-        centre = torso_pose(self.body, lifted, self.body.rest_angles)
-        if centre is None:
-            return []
-        return self._initialise(centre, targets, depth, rng, timings, max(generations // 4, 1))[:2]
-
-    def _search(self, objective: Objective, start: np.ndarray, rng: np.random.Generator, pso: PsoConfig,
+    def pso_search(self, objective: Objective, start: np.ndarray, rng: np.random.Generator, pso: PsoConfig,
                 groups: np.ndarray | None = None) -> PsoResult:
         """One PSO of ``objective`` from ``start`` (P, 36): coarse to fine when the objective
         renders and has a coarse level (the first ``config.coarse_share`` of the generations on

@@ -53,7 +53,7 @@ class TrackerConfig:
     start_budget: int = setting(64, "least particles and generations of a track's start, per facing", minimum=1)
     recheck: int = setting(10, "refit the start's facings every N frames and let them compete (0 = off)",
                            minimum=0)
-    """Also on a new track's 1st, 2nd and 4th frame (:data:`swarmpose.tracking.body_tracker.YOUNG_RECHECKS`)."""
+    """Also on a new track's 1st, 2nd and 4th frame (:data:`swarmpose.tracking.facings.YOUNG_RECHECKS`)."""
     label_swaps: bool = setting(True, "a detected left/right pair may match the model's pair crossed, at a cost")
     """Detectors swap sides on people seen from behind."""
     penetration: float = setting(1.0, "w_P: cost per cm of an elbow or wrist inside the torso (0 = off)",
