@@ -30,6 +30,7 @@ from swarmpose.gpu.reference import raycast_tiles, reference_score
 from swarmpose.gpu.scorer import ParticleScorer
 from swarmpose.gpu.tile import box_around
 from swarmpose.sim.render import Renderer, Room
+from swarmpose.tracking.config import tracker_default
 
 TRUE_POSE_DISTANCE = 3.0  # m in front of the camera
 FACING = (0.0, 1.0, 0.0, 0.0)
@@ -80,7 +81,7 @@ def bench_score(particles: int = 64, resolution: tuple[int, int] = (64, 64), bod
     h_true, h, depth = _scene(model, rng, int(particles), intr)
     box = box_around(intr.project(model.pose(h_true[None])[0]), margin=0.15)
 
-    scorer = ParticleScorer(model, intr, tuple(resolution), context=device)
+    scorer = ParticleScorer(model, intr, tuple(resolution), threshold=tracker_default("threshold_m"), context=device)
     scorer.set_observation(depth, box)
     rows = []
     for i in range(warmup + repeats):
