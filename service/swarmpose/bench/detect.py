@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from swarmpose.body.skeleton import COCO17
+from swarmpose.core.assets import asset_folders
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError
 from swarmpose.detect.onnx_pose import OnnxPoseDetector, default_threads
@@ -38,13 +39,9 @@ MODELS = {"movenet": "pose2d/movenet_singlepose_lightning.onnx",
 
 
 def find_assets(assets: str | Path | None = None) -> Path:
-    """The shared assets folder: ``assets``, else ``$SWARMPOSE_ASSETS``, else ``../shared/assets`` from the
-    working directory or from the source checkout. ConfigError when none exists."""
-    candidates = [Path(assets).expanduser()] if assets else [
-        *([Path(os.environ["SWARMPOSE_ASSETS"])] if os.environ.get("SWARMPOSE_ASSETS") else []),
-        Path.cwd().parent / "shared" / "assets",
-        Path(__file__).resolve().parents[3] / "shared" / "assets",
-    ]
+    """The shared assets folder: ``assets``, else the first of :func:`~swarmpose.core.assets.asset_folders`
+    that holds the COCO photo. ConfigError when none does."""
+    candidates = [Path(assets).expanduser()] if assets else asset_folders()
     for path in candidates:
         if (path / COCO_PHOTO).is_file():
             return path

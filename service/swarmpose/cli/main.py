@@ -18,6 +18,7 @@ from swarmpose import __version__
 from swarmpose.cli.bench import add_bench_commands
 from swarmpose.cli.common import DEFAULTS, verbosity_parent
 from swarmpose.cli.demo import add_demo_command
+from swarmpose.cli.models import add_models_command
 from swarmpose.cli.personalize import add_personalize_command
 from swarmpose.cli.probe import add_probe_command
 from swarmpose.cli.serve import add_service_commands
@@ -46,6 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_body_command(sub, common)
     add_personalize_command(sub, common)
     add_view_command(sub, common)
+    add_models_command(sub, common)
     return parser
 
 

@@ -25,6 +25,7 @@ import os
 from pathlib import Path
 from urllib.parse import parse_qsl
 
+from swarmpose.core.assets import asset_folders
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import parse_bool
 from swarmpose.detect.joints import Detector
@@ -43,13 +44,18 @@ MODELS_HELP = ("put the .onnx file there or name a folder with --models DIR / SW
 
 def model_folders(models: str = "") -> list[Path]:
     """Where ``--detector movenet|blazepose`` looks, in order: ``models`` (else ``$SWARMPOSE_MODELS``),
-    ``$XDG_DATA_HOME/swarmpose/models`` (``~/.local/share/swarmpose/models``), then the shared
-    assets' ``pose2d`` (``$SWARMPOSE_ASSETS``, else ``../shared/assets`` from the working directory)."""
+    ``$XDG_DATA_HOME/swarmpose/models`` (``~/.local/share/swarmpose/models``: :func:`user_models_folder`),
+    then the shared assets' ``pose2d`` (:func:`~swarmpose.core.assets.asset_folders`: ``$SWARMPOSE_ASSETS``,
+    ``../shared/assets`` from the working directory, beside the checkout), whatever the working directory."""
     first = models or os.environ.get("SWARMPOSE_MODELS", "")
+    return [*([Path(first).expanduser()] if first else []), user_models_folder(),
+            *(folder / "pose2d" for folder in asset_folders())]
+
+
+def user_models_folder() -> Path:
+    """The user's models folder: ``$XDG_DATA_HOME/swarmpose/models`` (``~/.local/share/swarmpose/models``)."""
     data = Path(os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share")
-    assets = Path(os.environ["SWARMPOSE_ASSETS"]) if os.environ.get("SWARMPOSE_ASSETS") else (
-        Path.cwd().parent / "shared" / "assets")
-    return [*([Path(first).expanduser()] if first else []), data / "swarmpose" / "models", assets / "pose2d"]
+    return data / "swarmpose" / "models"
 
 
 def find_network(name: str, models: str = "") -> Path:
@@ -96,6 +102,17 @@ def resolve_detector(spec: str, source=None) -> str:
     if spec != "auto":
         return spec
     return "simulated" if has_recorded_detections(source) else "movenet"
+
+
+def detector_note(requested: str, detector: Detector) -> str:
+    """What a run says about its 2D joints: the detector ``requested`` (``--detector``) became,
+    with its model file, and, where ``auto`` picked the recorded detections, that it did."""
+    path = getattr(detector, "path", None)
+    text = f"2D joints: {getattr(detector, 'name', type(detector).__name__)}" + (f" ({path})" if path else "")
+    if requested.strip() == "auto" and getattr(detector, "name", "") == "simulated":
+        text += (": the detections the source recorded (--detector auto picks them on a source that has them: "
+                 "the sequence's own truth plus noise, not a network; pass --detector movenet to run one)")
+    return text
 
 
 def make_detector(spec: str, source=None, models: str = "") -> Detector:

@@ -11,6 +11,7 @@ any source URI. Both run the same per-frame step as the command line.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterator
 from typing import Any
 
@@ -23,7 +24,7 @@ from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError, ShapeError
 from swarmpose.core.settings import with_settings
 from swarmpose.detect.joints import Detector
-from swarmpose.detect.registry import make_detector
+from swarmpose.detect.registry import detector_note, make_detector
 from swarmpose.pipeline.builder import build_pipeline
 from swarmpose.pipeline.features import refuse
 from swarmpose.pipeline.run import results, source_error
@@ -31,6 +32,8 @@ from swarmpose.sources.base import Frame, FrameSource, SkippedFrame
 from swarmpose.sources.registry import open_source
 from swarmpose.tracking.config import TrackerConfig
 from swarmpose.tracking.result import FrameResult
+
+log = logging.getLogger(__name__)
 
 
 class Tracker:
@@ -42,9 +45,9 @@ class Tracker:
     shape is scaled to each person's height on their first upright frames (``auto_height``,
     :mod:`swarmpose.personalise.auto_height`; a loaded body is kept as it is). detector: a spec
     (``"auto"``: the recorded detections of a ``source`` that has them, else ``"movenet"``;
-    ``"movenet"``/``"blazepose"`` from the
-    models folder, ``$SWARMPOSE_MODELS`` first; ``"onnx:MODEL.onnx"``, ``"openpose-json:DIR"``,
-    ``"simulated"``) or an object with ``detect(frame, box)``;
+    ``"movenet"``/``"blazepose"`` from the models folders, whatever the working directory
+    (``models``, else ``$SWARMPOSE_MODELS``, first; see ``swarmpose models``); ``"onnx:MODEL.onnx"``,
+    ``"openpose-json:DIR"``, ``"simulated"``) or an object with ``detect(frame, box)``;
     a detector made from a spec is the tracker's and closed with it. intrinsics: the
     camera (needed by :meth:`track`; :meth:`track_frame` takes each frame's own). source:
     the frame source, needed by the ``simulated`` detector (it replays the recorded
@@ -65,7 +68,7 @@ class Tracker:
     def __init__(self, body: str | SkinnedBody = "builtin", detector: str | Detector = "auto",
                  intrinsics: Intrinsics | None = None, *, shape: str | None = None,
                  source: FrameSource | None = None, config: TrackerConfig | None = None, coordinates: str = "camera",
-                 floor: str | None = None, **settings: Any):
+                 floor: str | None = None, models: str = "", **settings: Any):
         self.config = with_settings(config or TrackerConfig(), **settings)
         if isinstance(detector, str) and detector.strip() == "simulated" and source is None:
             raise ConfigError("the simulated detector draws its keypoints from a source's ground truth (a "
@@ -89,7 +92,9 @@ class Tracker:
         triangles = self.config.triangles
         self.body = loaded if len(loaded.triangles) <= triangles else loaded.tracking_lod(triangles)
         self._owns_detector = isinstance(detector, str)
-        self.detector: Detector = make_detector(detector, source) if isinstance(detector, str) else detector
+        self.detector: Detector = (make_detector(detector, source, models) if isinstance(detector, str)
+                                   else detector)
+        log.info("%s", detector_note(detector if isinstance(detector, str) else "", self.detector))
         self.intrinsics = intrinsics
         self.pipeline = build_pipeline("offline", self.body, self.detector, self.config,
                                        body_spec=body if isinstance(body, str) else "", shape=shape or "",

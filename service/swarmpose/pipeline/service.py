@@ -21,7 +21,7 @@ from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.progress import progress_bar
 from swarmpose.detect.joints import Detector
-from swarmpose.detect.registry import make_detector, resolve_detector
+from swarmpose.detect.registry import detector_note, make_detector, resolve_detector
 from swarmpose.messages.build import info_message
 from swarmpose.pipeline.builder import build_pipeline
 from swarmpose.pipeline.config import ServiceConfig
@@ -98,9 +98,11 @@ def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score:
         body = load_body(config.body, config.shape or None)
     source = open_source(config.source)
     stack.callback(source.close)
+    requested = config.detector
     config = replace(config, detector=resolve_detector(config.detector, source))  # what "auto" picked
     detector = make_detector(config.detector, source, config.models)
     stack.callback(detector.close)
+    log.info("%s", detector_note(requested, detector))
     warn_of_another_body(source, body, config)
     ground_truth = getattr(source, "ground_truth", None)
     if need_ground_truth and ground_truth is None:
