@@ -315,7 +315,10 @@ def test_health_reads_the_status_file(wave_sequence, body, tmp_path, capsys):
     age = re.search(r"last status ([0-9.]+) s old", capsys.readouterr().out.splitlines()[-1])
     assert age and 60.0 <= float(age.group(1)) < 70.0  # 60 s, plus however long the command took to start
     assert main(["health", "--file", str(tmp_path / "none.json")]) == 1
-    assert "no status" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "no status" in out and "--health-file" in out
+    assert main(["health", "--file", str(tmp_path / "missing" / "status.json")]) == 1  # a path nobody can write
+    assert "its folder does not exist" in capsys.readouterr().out
 
 
 def test_a_detector_error_type_from_the_project_is_reported_the_same(wave_sequence, body):

@@ -41,14 +41,16 @@ def frame_record(frame: Frame, joints=None) -> dict:
     return record
 
 
-def probe_records(source: FrameSource, frames: int = 10, joints: str | None = None) -> Iterator[dict]:
-    """Up to ``frames`` per-frame records (skipped frames as ``{index, timestamp_ns, skipped}``)."""
+def probe_records(source: FrameSource, frames: int = 10, joints: str | None = None,
+                  models: str = "") -> Iterator[dict]:
+    """Up to ``frames`` per-frame records (skipped frames as ``{index, timestamp_ns, skipped}``); with
+    ``joints`` a detector spec (named networks from ``models`` first), each frame's 2D joints."""
     from swarmpose.detect.registry import make_detector
     from swarmpose.sources.base import SkippedFrame
 
     detector = None
     if joints:
-        detector = make_detector(joints, source)
+        detector = make_detector(joints, source, models)
     try:
         count = 0
         for item in source:
@@ -117,7 +119,8 @@ def format_summary(s: dict, first: dict | None) -> str:
     return "\n".join(lines)
 
 
-def run_probe(uri: str, frames: int = 10, joints: str | None = None, as_json: bool = False, out=None) -> int:
+def run_probe(uri: str, frames: int = 10, joints: str | None = None, as_json: bool = False, out=None,
+              models: str = "") -> int:
     """Open ``uri``, read ``frames`` frames, print per-frame lines (JSON objects with ``as_json``,
     then a ``{"summary": …}`` object) or a readable report; returns the exit status (0)."""
     from swarmpose.sources.registry import open_source
@@ -125,7 +128,7 @@ def run_probe(uri: str, frames: int = 10, joints: str | None = None, as_json: bo
     out = out or sys.stdout
     with open_source(uri) as source:
         records = []
-        for record in probe_records(source, frames, joints):
+        for record in probe_records(source, frames, joints, models):
             records.append(record)
             if as_json:
                 print(json.dumps(record), file=out, flush=True)
@@ -142,7 +145,8 @@ def run_probe(uri: str, frames: int = 10, joints: str | None = None, as_json: bo
 
 def cmd_probe(args: argparse.Namespace) -> int:
     """Read a few frames of a source and describe them (resolution, intrinsics, depth, rate, joints)."""
-    return run_probe(args.source, frames=args.frames, joints=args.detector, as_json=args.json)
+    return run_probe(args.source, frames=args.frames, joints=args.detector, as_json=args.json,
+                     models=args.models or "")
 
 
 def add_probe_command(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
@@ -150,9 +154,11 @@ def add_probe_command(sub: argparse._SubParsersAction, common: argparse.Argument
     p = sub.add_parser("probe", parents=[common], formatter_class=DEFAULTS,
                        help="read a few frames of a source: resolution, intrinsics, depth range, rate, joints")
     p.add_argument("--source", required=True, help="folder:DIR, rgbd:C.png,D.png,K.json, mkv:FILE, bag:FILE, "
-                                                   "realsense:[SERIAL], azure:[INDEX], openni2:[FILE.oni|URI]")
+                                                   "utdmhad:FILE.mat, realsense:[SERIAL], azure:[INDEX], "
+                                                   "openni2:[FILE.oni|URI]")
     p.add_argument("--detector", "--joints", dest="detector", default=None,
-                   help="also detect 2D joints: simulated, onnx:MODEL, openpose-json:DIR")
+                   help="also detect 2D joints: movenet, blazepose, simulated, onnx:MODEL, openpose-json:DIR")
+    p.add_argument("--models", default=None, help="the folder movenet and blazepose are looked for in first")
     p.add_argument("--frames", type=positive_int, default=10, help="frames to read")
     p.add_argument("--json", action="store_true", help="one JSON object per frame, then a summary object")
     p.set_defaults(func=cmd_probe)

@@ -96,7 +96,12 @@ def cmd_health(args: argparse.Namespace) -> int:
         age = (time.time_ns() - int(status["time_ns"])) / 1e9
         state = status["state"]
     except FileNotFoundError:
-        print(f"unhealthy: no status in {path} yet (the worker has not run a status period)")
+        if not Path(path).parent.is_dir():
+            print(f"unhealthy: {path}: its folder does not exist; give the worker's --health-file "
+                  "(SWARMPOSE_HEALTH_FILE) to both")
+        else:
+            print(f"unhealthy: no status in {path} yet (no worker writes it, or it has not run a status period: "
+                  "check the worker's --health-file)")
         return 1
     except (OSError, ValueError, KeyError, TypeError) as exc:
         print(f"unhealthy: {path} is not a status message ({exc})")

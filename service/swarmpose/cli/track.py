@@ -61,7 +61,7 @@ def run_tracking(args: argparse.Namespace, *, score: bool) -> tuple[ServiceConfi
         if threading.current_thread() is threading.main_thread():  # SIGINT/SIGTERM: end after this frame
             stop_on_signals(stop.set, stack)
         summary = run_sequence(parts.source, parts.pipeline, parts.sinks, camera=config.camera_id,
-                               frames=config.frames, progress=not quiet(args), stop=stop)
+                               frames=config.frames, progress=not quiet(args), stop=stop, label=args.command)
     if summary.interrupted:
         print(f"swarmpose: {INTERRUPTED_NOTE}", file=sys.stderr)
     return config, parts, summary

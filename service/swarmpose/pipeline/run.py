@@ -129,8 +129,9 @@ def _counted(done: list[FrameResult], seconds: dict[int, float], summary: RunSum
 
 def run_sequence(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline, sinks: Sequence[Sink] = (), *,
                  camera: str = "camera0", frames: int = 0, progress: bool = True,
-                 stop: threading.Event | None = None) -> RunSummary:
+                 stop: threading.Event | None = None, label: str = "track") -> RunSummary:
     """Track ``source`` frame by frame, handing each frame message to ``sinks``; closes the sinks.
+    ``label``: the progress bar's (the command's name).
     ``stop`` (set from a signal handler) ends the run after the frame in progress, which every
     sink gets, so the files hold the same frames (with the backward pass, the frames it held go
     out with their forward fits)."""
@@ -138,7 +139,7 @@ def run_sequence(source: Iterable[Frame | SkippedFrame], pipeline: FramePipeline
     live = list(sinks)
     total = frames or getattr(source, "length", None) or None
     try:
-        with progress_bar("track", total, enabled=progress) as bar:
+        with progress_bar(label, total, enabled=progress) as bar:
             frames_of = {}
             for result in results(remember_frames(source, frames_of), pipeline, frames, summary, stop):
                 message = result.to_message(camera)
