@@ -35,3 +35,30 @@ def test_eval_progress_says_eval(wave_sequence, capsys):
                  "--max-people", "1"]) == 0
     err = capsys.readouterr().err
     assert "eval:" in err and "track:" not in err
+
+
+def test_a_folder_whose_depth_images_are_all_corrupt_exits_1_and_says_so(wave_sequence, tmp_path, capsys):
+    import shutil
+
+    broken = tmp_path / "broken"
+    shutil.copytree(wave_sequence, broken)
+    for png in (broken / "depth").glob("*.png"):
+        png.write_bytes(b"not a png")
+    assert main(["track", str(broken), "--out", str(tmp_path / "out"), "--frames", "2", "--particles", "4",
+                 "--generations", "2", "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "none of the 2 frames could be read" in err and "cannot be decoded" in err
+
+
+def test_a_garbage_recording_is_named_without_an_error_number(tmp_path, capsys):
+    garbage = tmp_path / "garbage.mkv"
+    garbage.write_bytes(bytes(range(256)) * 20)
+    assert main(["track", str(garbage), "--out", str(tmp_path / "out"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert f"cannot open {garbage}" in err and "[Errno" not in err
+
+
+def test_view_of_a_missing_recording_fails_before_it_announces_a_viewer(tmp_path, capsys):
+    assert main(["view", str(tmp_path / "nope")]) == 2
+    err = capsys.readouterr().err
+    assert "no such file or folder" in err and "serving the view" not in err

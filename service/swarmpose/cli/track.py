@@ -67,9 +67,21 @@ def run_tracking(args: argparse.Namespace, *, score: bool) -> tuple[ServiceConfi
     return config, parts, summary
 
 
+def nothing_read(run: RunSummary) -> bool:
+    """Whether the run read frames and could decode none of them (each skipped)."""
+    return run.frames > 0 and run.states.get("skipped", 0) == run.frames
+
+
 def exit_status(run: RunSummary) -> int:
-    """130 when a signal stopped the run, 1 when a sink or the source failed, else 0."""
-    return INTERRUPTED if run.interrupted else 1 if run.sink_errors or run.source_error else 0
+    """130 when a signal stopped the run, 1 when a sink or the source failed or no frame could be
+    read (said on stderr), else 0."""
+    if run.interrupted:
+        return INTERRUPTED
+    if nothing_read(run):
+        print(f"swarmpose: none of the {run.frames} frames could be read (each was skipped; the warnings say "
+              "why): the outputs hold no pose; check the recording's files", file=sys.stderr)
+        return 1
+    return 1 if run.sink_errors or run.source_error else 0
 
 
 def cmd_track(args: argparse.Namespace) -> int:

@@ -41,10 +41,11 @@ def wait_for_signal() -> None:
 
 def cmd_view(args: argparse.Namespace) -> int:
     """Log the recording into a .rrd file or a viewer."""
-    from swarmpose.publish.rerun_files import log_recording
+    from swarmpose.publish.rerun_files import log_recording, poses_file
     from swarmpose.publish.rerun_view import open_view_sink
 
     config = from_args(ServiceConfig, args)
+    poses_file(args.recording)  # a recording that is not there is named before a viewer is started
     sink = open_view_sink(config.camera_id, rrd=config.rrd, view=not config.rrd, url=config.view_url,
                           port=config.view_port, depth_step=args.depth_step)
     try:

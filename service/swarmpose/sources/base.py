@@ -160,9 +160,11 @@ _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 
 def exc_message(exc: BaseException) -> str:
-    """One line from an exception (Open3D's colour codes and source locations removed)."""
+    """One line from an exception (Open3D's colour codes and source locations, and an error number
+    before the text, removed)."""
     text = _ANSI.sub("", str(exc)).strip() or type(exc).__name__
     text = re.sub(r"^\[Open3D \w+\] .*? \S+\.(?:cpp|h):\d+: ", "", text, flags=re.S)
+    text = re.sub(r"^\[Errno -?\d+\] ", "", text)  # FFmpeg's error codes as errno numbers mean nothing to a user
     return " ".join(text.split())
 
 
