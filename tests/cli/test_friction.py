@@ -62,3 +62,12 @@ def test_view_of_a_missing_recording_fails_before_it_announces_a_viewer(tmp_path
     assert main(["view", str(tmp_path / "nope")]) == 2
     err = capsys.readouterr().err
     assert "no such file or folder" in err and "serving the view" not in err
+
+
+def test_a_bvh_that_no_floor_placed_says_so(wave_sequence, tmp_path, capsys):
+    flags = ["--frames", "2", "--particles", "4", "--generations", "2", "--no-overlay", "-q"]
+    assert main(["track", str(wave_sequence), "--out", str(tmp_path / "off"), "--floor", "off", *flags]) == 0
+    err = capsys.readouterr().err
+    assert f"{tmp_path / 'off' / 'poses.bvh'}: no floor was known" in err and "--floor EXTRINSICS.json" in err
+    assert main(["track", str(wave_sequence), "--out", str(tmp_path / "auto"), *flags]) == 0  # its floor is seen
+    assert "no floor was known" not in capsys.readouterr().err

@@ -120,6 +120,8 @@ class BvhSink(FileSink):
         self._last: str | None = None
         self._poses: list[tuple[np.ndarray | None, np.ndarray]] | None = [] if may_change else None
         self._kept_posed = 0
+        self.floor_known = False
+        """Whether any frame's message placed the motion on a floor (the world frame)."""
         try:
             self._file.write(self._header(fps).encode("ascii"))
         except OSError as exc:
@@ -238,6 +240,7 @@ class BvhSink(FileSink):
         mine = [b for b in message.get("bodies") or [] if b.get("id") == self.body_id]
         pose = mine[0].get("pose") if mine else None
         to_bvh = bvh_transform(message)
+        self.floor_known |= not np.array_equal(to_bvh, bvh_transform(None))
         if pose is not None:
             try:
                 pose = np.asarray(pose, dtype=np.float64)
@@ -280,6 +283,15 @@ class BvhSink(FileSink):
                 rest, to_bvh = self.body.rest_pose(translation=(0.0, self.body.floor_offset, 0.0)), np.eye(4)
             self._last = _numbers(self.channels(rest, to_bvh))
         return self._last
+
+    def close(self) -> None:
+        """Close the file; a warning when its motion was never placed on a floor."""
+        warn = not self._closed and self.frames > 0 and not self.floor_known
+        super().close()
+        if warn:
+            log.warning("%s: no floor was known (none visible to fit, or --floor off): the motion is in the "
+                        "camera's axes turned upright, not standing on a floor; pass --floor EXTRINSICS.json "
+                        "to place it", self.path)
 
     def frame(self, message: dict, frame: Frame | None = None) -> None:
         """Append one MOTION row for ``message`` and rewrite the ``Frames:`` count."""
