@@ -71,3 +71,12 @@ def test_a_bvh_that_no_floor_placed_says_so(wave_sequence, tmp_path, capsys):
     assert f"{tmp_path / 'off' / 'poses.bvh'}: no floor was known" in err and "--floor EXTRINSICS.json" in err
     assert main(["track", str(wave_sequence), "--out", str(tmp_path / "auto"), *flags]) == 0  # its floor is seen
     assert "no floor was known" not in capsys.readouterr().err
+
+
+def test_run_json_says_what_the_run_was_made_with(wave_sequence, tmp_path):
+    assert main(["track", str(wave_sequence), "--out", str(tmp_path), "--frames", "1", "--particles", "4",
+                 "--generations", "2", "--no-overlay", "-q"]) == 0
+    run = json.loads((tmp_path / "run.json").read_text())
+    assert run["schema"] == "swarmpose.run" and run["source"] == str(wave_sequence)
+    assert (run["detector_requested"], run["detector"], run["model"]) == ("auto", "simulated", None)
+    assert run["tracker"]["particles"] == 4 and run["tracker"]["tile"] == [64, 64]

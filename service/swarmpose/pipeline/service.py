@@ -32,6 +32,7 @@ from swarmpose.pipeline.step import FramePipeline
 from swarmpose.pipeline.worker import Worker
 from swarmpose.publish.files import open_recording
 from swarmpose.publish.rerun_view import open_view_sink
+from swarmpose.publish.run_file import write_run_file
 from swarmpose.publish.sink import Sink
 from swarmpose.publish.zenoh_link import ZenohSink
 from swarmpose.sim.scoring import ScoreSink
@@ -79,6 +80,19 @@ def warn_of_another_body(source: FrameSource, body: SkinnedBody, config: Service
                     f" --shape {config.shape}" if config.shape else "")
 
 
+def run_record(config: ServiceConfig, requested: str, detector: Detector) -> dict:
+    """What ``run.json`` says of a run (:mod:`swarmpose.publish.run_file`)."""
+    from dataclasses import asdict
+
+    from swarmpose import __version__
+
+    path = getattr(detector, "path", None)
+    return {"swarmpose": __version__, "source": config.source, "detector_requested": requested,
+            "detector": getattr(detector, "name", type(detector).__name__), "model": str(path) if path else None,
+            "body": config.body, "shape": config.shape, "coordinates": config.coordinates, "floor": config.floor,
+            "tracker": {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(config.tracker).items()}}
+
+
 def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score: bool = True,
                need_ground_truth: bool = False, driver: str = "offline") -> Parts:
     """Open the source, detector and body of ``config`` (closed by ``stack``) and the pipeline of
@@ -121,6 +135,7 @@ def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score:
             stack.callback(sink.close)
         parts.sinks.extend(recording)
         parts.recording = recording
+        write_run_file(out, run_record(config, requested, detector))
     view = open_view_sink(config.camera_id, rrd=config.rrd, view=config.view, url=config.view_url,
                           port=config.view_port, live=source.live)
     if view is not None:  # the rerun viewer / .rrd (--view, --rrd)
