@@ -6,6 +6,10 @@ ensemble of them), so a feature is wired in one place and refused in one place
 Which tracker each person gets (:func:`body_fitting`): with a shape space and ``personalize`` N,
 one that fits the person's body on their first N tracked frames; where the automatic height
 applies, one that scales the body to the person's stature; else the body as it is.
+
+The backward pass (:mod:`swarmpose.pipeline.backward`) and the shape fit
+(:mod:`swarmpose.personalise.personalise`) take no pipeline from here: they refit one person's
+recorded steps (no detection, no people) with a single-body tracker of that step's body and settings.
 """
 
 from __future__ import annotations
