@@ -301,3 +301,20 @@ def test_a_headless_view_is_served_to_a_remote_viewer(tracked, tmp_path):
     rows = read_rrd(saved)
     check_bodies(rows, messages_of(out))
     check_depth(rows, sequence, list(range(6)))
+
+
+def test_a_served_view_names_its_url_even_when_quiet(caplog, monkeypatch):
+    """Without a display the URL is the only way to the view: it is said at warning level, which
+    --quiet keeps, and says the view lasts as long as the process."""
+    import logging
+
+    from swarmpose.publish import rerun_stream
+
+    monkeypatch.setattr(rerun_stream, "has_display", lambda: False)
+    caplog.set_level(logging.WARNING, logger="swarmpose")
+    stream = rerun_stream.open_stream("cam", view=True, port=free_port())
+    try:
+        said = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+        assert any("serving the view on rerun+http://" in m and "while this process runs" in m for m in said), said
+    finally:
+        stream.close()

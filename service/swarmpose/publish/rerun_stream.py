@@ -130,13 +130,14 @@ def open_stream(name: str, *, rrd: str = "", view: bool = False, url: str = "", 
         targets.append(f"a rerun viewer window (port {port})")
     elif serving:
         sinks.append(rr.GrpcServerSink("0.0.0.0", port, server_memory_limit=SERVER_MEMORY))
-        targets.append(f"no display here: serving the view on rerun+http://{socket.gethostname()}:{port}/proxy; "
-                       f"open it elsewhere with `rerun rerun+http://HOST:{port}/proxy`")
+        targets.append(f"no display here: serving the view on rerun+http://{socket.gethostname()}:{port}/proxy "
+                       f"while this process runs; open it elsewhere with `rerun rerun+http://HOST:{port}/proxy` "
+                       "(`swarmpose view` serves a finished run's)")
     try:
         recording.set_sinks(*sinks)
     except Exception as exc:  # a port in use, a bad URL
         raise ConfigError(f"cannot open the rerun view ({', '.join(targets)}): {exc}; choose another --view-port "
                           "or --view-url") from exc
-    for target in targets:
-        log.info("viewer: %s", target)
+    for target in targets:  # the served URL even with --quiet: without it the view cannot be found
+        log.log(logging.WARNING if serving and target.startswith("no display") else logging.INFO, "viewer: %s", target)
     return Stream(recording, targets, path)
