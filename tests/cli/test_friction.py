@@ -80,3 +80,42 @@ def test_run_json_says_what_the_run_was_made_with(wave_sequence, tmp_path):
     assert run["schema"] == "swarmpose.run" and run["source"] == str(wave_sequence)
     assert (run["detector_requested"], run["detector"], run["model"]) == ("auto", "simulated", None)
     assert run["tracker"]["particles"] == 4 and run["tracker"]["tile"] == [64, 64]
+
+
+UTD = ASSETS / "rgbd" / "utd_mhad" / "depth" / "a1_s1_t1_depth.mat"
+EMPTY_MKV = ASSETS / "rgbd" / "azure_kinect_one_frame" / "recording.mkv"
+
+
+@needs_assets
+def test_world_coordinates_without_a_floor_say_the_poses_stayed_in_the_camera_frame(tmp_path, capsys):
+    """UTD-MHAD's depth has its background removed: no floor to fit."""
+    assert main(["track", f"utdmhad:{UTD}", "--out", str(tmp_path), "--coordinates", "world", "--frames", "2",
+                 "--particles", "4", "--generations", "2", "--no-overlay", "-q"]) == 0
+    assert "--coordinates world: no floor was found" in capsys.readouterr().err
+    messages = [json.loads(line) for line in (tmp_path / "poses.jsonl").read_text().splitlines()]
+    assert {m["coordinates"] for m in messages} == {"camera"}
+
+
+@needs_assets
+def test_probe_counts_keypoints_as_the_tracker_does_and_says_when_nobody_is_there(capsys):
+    assert main(["probe", "--source", str(EMPTY_MKV), "--detector", "movenet", "--frames", "1"]) == 0
+    assert "no person found" in capsys.readouterr().out  # the recording shows a room with nobody in it
+
+
+def test_an_earlier_runs_per_person_files_are_removed_from_the_output_folder(tmp_path):
+    from swarmpose.body.loader import load_body
+    from swarmpose.publish.files import open_recording
+
+    (tmp_path / "poses_id3.bvh").write_text("an earlier run's person")
+    (tmp_path / "notes.txt").write_text("the user's own")
+    for sink in open_recording(tmp_path, load_body("builtin"), overlay=False):
+        sink.close()
+    assert not (tmp_path / "poses_id3.bvh").exists() and (tmp_path / "notes.txt").exists()
+
+
+def test_help_all_works_before_a_command_too(capsys):
+    try:
+        main(["--help-all"])
+    except SystemExit as exit_:
+        assert exit_.code == 0
+    assert "COMMAND" in capsys.readouterr().out

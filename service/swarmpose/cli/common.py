@@ -49,10 +49,9 @@ def verbosity_parent(top: bool = False) -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="count", default=default, help="more log output (debug)")
     p.add_argument("-q", "--quiet", action="count", default=default,
                    help="less output: warnings only, no progress bars")
-    if not top:
-        from swarmpose.cli.settings import HelpAll
+    from swarmpose.cli.settings import HelpAll
 
-        p.add_argument("--help-all", action=HelpAll)
+    p.add_argument("--help-all", action=HelpAll)
     return p
 
 

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from swarmpose.cli.common import DEFAULTS, positive_int
+from swarmpose.tracking.config import tracker_default
 
 if TYPE_CHECKING:  # the sources and detectors are imported by the command that reads them
     from swarmpose.sources.base import Frame, FrameSource
@@ -93,8 +94,13 @@ def format_record(r: dict) -> str:
     line = (f"frame {r['index']}: {r['width']}x{r['height']}, t = {r['timestamp_ns'] / 1e9:.3f} s, {depth}, "
             f"valid {100 * r['valid_fraction']:.1f} %" + ("" if r["has_color"] else ", no colour"))
     if "joints2d" in r:
-        found = {k: v for k, v in r["joints2d"].items() if v[2] > 0}
-        line += f"\n  joints ({r['joints_layout']}, {len(found)}/{len(r['joints2d'])} found):"
+        least = tracker_default("min_score")  # what the tracker counts as a detected keypoint
+        found = {k: v for k, v in r["joints2d"].items() if v[2] >= least}
+        torso = [j in found for j in ("left_shoulder", "right_shoulder", "left_hip", "right_hip")]
+        person = (torso[0] and torso[1]) or (torso[2] and torso[3]) or sum(torso) >= 3  # what a track starts on
+        line += (f"\n  joints ({r['joints_layout']}, {len(found)}/{len(r['joints2d'])} with a score of at least "
+                 f"{least:g}, the tracker's --min-score)"
+                 + (":" if person else ": no person found (no torso: both shoulders, both hips or 3 of 4)"))
         for name, (x, y, s) in found.items():
             line += f"\n    {name:<16} {x:8.1f} {y:8.1f}  score {s:.2f}"
     return line

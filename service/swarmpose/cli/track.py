@@ -64,6 +64,12 @@ def run_tracking(args: argparse.Namespace, *, score: bool) -> tuple[ServiceConfi
                                frames=config.frames, progress=not quiet(args), stop=stop, label=args.command)
     if summary.interrupted:
         print(f"swarmpose: {INTERRUPTED_NOTE}", file=sys.stderr)
+    world = parts.pipeline.world
+    if config.coordinates == "world" and (world is None or world.state is None
+                                          or world.state.camera_to_world is None):
+        print("swarmpose: --coordinates world: no floor was found (or nobody was tracked on it), so the poses "
+              "stayed in the camera frame (their messages say coordinates camera); pass --floor EXTRINSICS.json",
+              file=sys.stderr)
     return config, parts, summary
 
 

@@ -23,6 +23,7 @@ written raises :class:`~swarmpose.core.errors.OutputError` naming it.
 from __future__ import annotations
 
 import csv
+import logging
 from pathlib import Path
 
 from swarmpose.body.skeleton import EVAL_JOINTS, POSE_DIM
@@ -34,6 +35,8 @@ from swarmpose.publish.file_sink import FileSink, write_error
 from swarmpose.publish.overlay import OverlaySink
 from swarmpose.publish.sink import Sink
 from swarmpose.sources.base import Frame
+
+log = logging.getLogger(__name__)
 
 FRAME_COLUMNS: tuple[str, ...] = ("frame", "capture_ns", "received_ns", "publish_ns", "latency_ms", "coordinates")
 BODY_COLUMNS: tuple[str, ...] = ("body_id", "state", "reason")
@@ -121,13 +124,24 @@ def open_recording(out_dir: str | Path, body: SkinnedBody, fps: float = 30.0, ov
     """The replay sinks of folder ``out_dir`` (created if needed): poses.jsonl, poses.csv,
     the BVH files (:class:`PerIdBvhSink`: poses.bvh for id 0, poses_id<N>.bvh for id N,
     animating ``body`` at ``fps``, or with ``body_of`` each id's current body) and, with
-    ``overlay``, overlay.mp4."""
+    ``overlay``, overlay.mp4. An earlier run's ``poses_id<N>.bvh`` there are removed (the folder
+    then holds one run's files)."""
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise OutputError(f"cannot create the output folder {out}: {exc.strerror or exc}; "
                           "choose a writable output folder (or remove the file in its way)") from exc
+    stale = sorted(out.glob("poses_id*.bvh"))  # an earlier run's people: this run writes its own, or none
+    for path in stale:
+        try:
+            path.unlink()
+        except OSError as exc:
+            raise OutputError(f"cannot remove {path}, an earlier run's output: {exc.strerror or exc}; choose an "
+                              "empty output folder") from exc
+    if stale:
+        log.info("%s: removed %s of an earlier run (its other files are written anew)", out,
+                 ", ".join(p.name for p in stale))
     makers = [lambda: JsonlSink(out / "poses.jsonl"), lambda: CsvSink(out / "poses.csv"),
               lambda: PerIdBvhSink(out, body, fps, body_of)]
     if overlay:
