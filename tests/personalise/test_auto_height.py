@@ -112,7 +112,7 @@ def test_the_bvh_animates_the_scaled_body(tmp_path):
         given = parts.body
         run_sequence(parts.source, parts.pipeline, parts.sinks, frames=12, progress=False)
         tracker = parts.pipeline.tracker
-    factor = tracker.factor
+    factor = tracker.fitting.factor
     assert tracker.personalisation()["state"] == "locked" and factor < 0.95
     clip = read_bvh(out / "poses.bvh")
     names, parents = given.bone_names, given.rig.parents
