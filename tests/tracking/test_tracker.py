@@ -287,3 +287,14 @@ def test_the_polish_takes_the_searched_pose_further_down_and_leaves_the_arms(bod
     assert np.array_equal(polished.pose[arms], plain.pose[arms])  # the same search, the arms as it left them
     assert polished.objective["E"] < plain.objective["E"], (polished.objective["E"], plain.objective["E"])
     assert np.any(polished.pose[WITHOUT_ARMS] != plain.pose[WITHOUT_ARMS])
+
+
+def test_enough_of_the_torso_to_start_is_three_of_four_or_a_pair():
+    from swarmpose.tracking.init_pose import torso_enough
+
+    assert torso_enough(["left_hip", "right_hip", "left_shoulder"])
+    assert torso_enough(["left_shoulder", "right_shoulder", "nose"])  # an upper body filling the frame
+    assert torso_enough(["left_hip", "right_hip"])
+    assert not torso_enough(["left_hip", "right_hip"], pairs=False)  # a running track assumes no upright torso
+    assert not torso_enough(["left_hip", "left_shoulder", "nose", "left_ear"])
+    assert not torso_enough([])

@@ -94,10 +94,11 @@ def format_record(r: dict) -> str:
     line = (f"frame {r['index']}: {r['width']}x{r['height']}, t = {r['timestamp_ns'] / 1e9:.3f} s, {depth}, "
             f"valid {100 * r['valid_fraction']:.1f} %" + ("" if r["has_color"] else ", no colour"))
     if "joints2d" in r:
+        from swarmpose.tracking.init_pose import torso_enough
+
         least = tracker_default("min_score")  # what the tracker counts as a detected keypoint
         found = {k: v for k, v in r["joints2d"].items() if v[2] >= least}
-        torso = [j in found for j in ("left_shoulder", "right_shoulder", "left_hip", "right_hip")]
-        person = (torso[0] and torso[1]) or (torso[2] and torso[3]) or sum(torso) >= 3  # what a track starts on
+        person = torso_enough(found)  # what a track starts on
         line += (f"\n  joints ({r['joints_layout']}, {len(found)}/{len(r['joints2d'])} with a score of at least "
                  f"{least:g}, the tracker's --min-score)"
                  + (":" if person else ": no person found (no torso: both shoulders, both hips or 3 of 4)"))

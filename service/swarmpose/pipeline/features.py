@@ -20,9 +20,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from swarmpose.core.errors import ConfigError
-from swarmpose.tracking.config import TrackerConfig
+from swarmpose.tracking.config import TrackerConfig, tracker_default
 
-DRIVERS = ("offline", "threaded", "frame_by_frame")
+WHERE = {"offline": "offline runs", "threaded": "serve and replay", "frame_by_frame": "Tracker.track_frame"}
+"""Each driver and what it is called in a refusal."""
+DRIVERS = tuple(WHERE)
 
 
 @dataclass(frozen=True)
@@ -43,7 +45,7 @@ class Feature:
         value = getattr(config, self.setting)
         if self.value is not None:
             return value == self.value
-        return value != getattr(TrackerConfig(), self.setting)
+        return value != tracker_default(self.setting)
 
     def describe(self, config: TrackerConfig) -> str:
         """``setting = value`` as ``config`` has it."""
@@ -62,9 +64,6 @@ FEATURES = (
             "smoothing='centred'); or smoothing one-euro live", value="centred"),
 )
 """Every feature that some driver cannot run."""
-
-WHERE = {"offline": "offline runs", "threaded": "serve and replay", "frame_by_frame": "Tracker.track_frame"}
-
 
 def refuse(driver: str, config: TrackerConfig) -> None:
     """ConfigError naming the first feature ``config`` asks for that ``driver`` cannot run."""

@@ -90,7 +90,7 @@ def run_record(config: ServiceConfig, requested: str, detector: Detector) -> dic
     return {"swarmpose": __version__, "source": config.source, "detector_requested": requested,
             "detector": getattr(detector, "name", type(detector).__name__), "model": str(path) if path else None,
             "body": config.body, "shape": config.shape, "coordinates": config.coordinates, "floor": config.floor,
-            "tracker": {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(config.tracker).items()}}
+            "tracker": asdict(config.tracker)}
 
 
 def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score: bool = True,

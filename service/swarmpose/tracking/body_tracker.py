@@ -221,7 +221,7 @@ class BodyTracker:
         rng = np.random.default_rng([self.config.seed, frame.index])
         pso = self.config.pso_config
         budget = self.budget_ms if state == "tracking" else 0.0  # live: the swarm and polish sized to the frame
-        pso, self.polish_rounds = self.costs.sized(budget, pso, self.config.polish)
+        pso, rounds = self.costs.sized(budget, pso, self.config.polish)
         timings: dict[str, float] = {}
         proposals: list[np.ndarray] = []  # limb flips and arm proposals (tracking only)
         if state == "init":
@@ -248,14 +248,15 @@ class BodyTracker:
         timings.update(search_split(self.objective.take_spent(), timings["pso"]))
         duel = self.age < max(YOUNG_RECHECKS) and self.previous is not None  # a young track: both facings polished
         with timed(timings, "polish"):  # polish 0: as it is
-            best = polish_solution(self.objective, result, self.previous, self.polish_rounds, rng, duel,
+            best = polish_solution(self.objective, result, self.previous, rounds, rng, duel,
                                    self._hold_facing, REPLACED_TURN_DEG)
-        return self._judge(frame, joints, targets, state, best, result.evaluations, duel, others_removed, timings, t0)
+        scored = result.evaluations + POLISH_CANDIDATES * rounds * (1 + duel)  # the swarm's and the polish's
+        return self._judge(frame, joints, targets, state, best, scored, others_removed, timings, t0)
 
     def _judge(self, frame: Frame, joints: Joints2D | None, targets: JointTargets, state: str, best: np.ndarray,
-               evaluations: int, duel: bool, others_removed: bool, timings: dict[str, float], t0: float) -> BodyResult:
+               scored: int, others_removed: bool, timings: dict[str, float], t0: float) -> BodyResult:
         """The frame's verdict on ``best`` (36,): lost or not, the track's state after it, the joints and
-        their confidence, the cost model fed (``evaluations`` scored poses), the published result."""
+        their confidence, the cost model fed (``scored`` poses in the search and polish), the published result."""
         t_verdict = time.perf_counter()
         self.objective(best[None])
         parts = {k: float(v[0]) for k, v in self.objective.last_parts.items()}
@@ -275,8 +276,7 @@ class BodyTracker:
         timings["verdict"] = 1000 * (time.perf_counter() - t_verdict)
         timings["total"] = 1000 * (time.perf_counter() - t0)
         if state == "tracking":
-            polished = POLISH_CANDIDATES * self.polish_rounds * (1 + duel)
-            self.costs.record(timings["pso"] + timings["polish"], evaluations + polished, timings["total"])
+            self.costs.record(timings["pso"] + timings["polish"], scored, timings["total"])
         out = BodyResult(self.body_id, out_state, reason, best, joints3d, joints2d, conf, parts, timings, joints)
         if self.filter is None or out_state == "lost":
             return out
@@ -352,7 +352,7 @@ class BodyTracker:
         return lost_body(reason, self.body_id, {"total": 1000 * (time.perf_counter() - t0)}, joints)
 
     def pso_search(self, objective: Objective, start: np.ndarray, rng: np.random.Generator, pso: PsoConfig,
-                groups: np.ndarray | None = None) -> PsoResult:
+                   groups: np.ndarray | None = None) -> PsoResult:
         """One PSO of ``objective`` from ``start`` (P, 36): coarse to fine when the objective
         renders and has a coarse level (the first ``config.coarse_share`` of the generations on
         it), else at full resolution throughout; ``groups``: sub-swarms (:mod:`swarmpose.tracking.hypotheses`)."""

@@ -35,9 +35,9 @@ def recheck_due(index: int, age: int, every: int) -> bool:
     return bool(every) and (index % every == 0 or age in YOUNG_RECHECKS)
 
 
-
 def fit_facings(tracker: BodyTracker, centre: np.ndarray, targets: JointTargets, depth: np.ndarray,
-            rng: np.random.Generator, timings: dict[str, float], generations: int | None = None) -> list[np.ndarray]:
+                rng: np.random.Generator, timings: dict[str, float],
+                generations: int | None = None) -> list[np.ndarray]:
     """Start poses for ``tracker``'s frame without a track, best first.
 
     A side or back view makes the facing of the lifted torso unreliable (the far shoulder
@@ -45,10 +45,9 @@ def fit_facings(tracker: BodyTracker, centre: np.ndarray, targets: JointTargets,
     of :data:`FACINGS_DEG`. From each, two PSOs over wide angle ranges: first of the joint
     term alone (no rendering; the limbs find their detections), then of the full objective
     (with the joint term on also in depth mode) from there. The fits are ranked by that
-    objective, so depth and the face's keypoints decide between a facing and its mirror.
-    *Design change:* one PSO of the full objective from the rest angles left the limbs
-    unfitted from a side view (the depth term is nearly flat in them, and dominates E):
-    the true pose scored 17 units below every facing's fit.
+    objective, so depth and the face's keypoints decide between a facing and its mirror. (One
+    PSO of the full objective from the rest angles leaves a side view's limbs unfitted: the depth
+    term is nearly flat in them and dominates E.) ``generations``: a re-check's (None: a start).
     """
     if targets.count == 0:
         return [centre]
@@ -65,15 +64,15 @@ def fit_facings(tracker: BodyTracker, centre: np.ndarray, targets: JointTargets,
                        else Objective(tracker.body, tracker.intrinsics, tracker.objective.scorer, weights,
                                       tracker.objective.coarse))
     start_objective.set_frame(depth, box, targets, centre)
-    # the start runs once per track, so it gets at least config.start_budget (a smaller one left a side
-    # view's start unconverged); live, a start that keeps up
+    # a start runs once per track, so it gets at least config.start_budget (a smaller one left a side
+    # view's start unconverged), live a share of it; a re-check the frame's generations, live the start's particles
     first = generations is None
-    particles, budget = start_budget(tracker.config.start_budget, tracker.budget_ms, tracker.config.particles,
-                                     tracker.config.generations)
-    if not first:  # a re-check: the frame's generations; live, the start's particles
-        particles, budget = (particles if tracker.budget_ms > 0 else tracker.config.particles), generations
+    config = tracker.config
+    particles, budget = start_budget(config.start_budget, tracker.budget_ms, config.particles, config.generations)
+    if not first:
+        particles, budget = (particles if tracker.budget_ms > 0 else config.particles), generations
     # joints only (no depth): the joint stage is the whole fit, at twice the generations
-    pso = replace(tracker.config.pso_config, variant="perturbed",
+    pso = replace(config.pso_config, variant="perturbed",
                   generations=budget * (1 if joint_objective is not None else 2), particles=particles)
     fits = []
     for degrees in FACINGS_DEG:
@@ -90,9 +89,10 @@ def fit_facings(tracker: BodyTracker, centre: np.ndarray, targets: JointTargets,
     timings["init" if first else "recheck"] = 1000 * (time.perf_counter() - t)
     return [fits[k] for k in np.argsort(energy)]
 
+
 def recheck_facings(tracker: BodyTracker, index: int, lifted: dict[str, np.ndarray], targets: JointTargets,
-                depth: np.ndarray, rng: np.random.Generator, timings: dict[str, float],
-                generations: int) -> list[np.ndarray]:
+                    depth: np.ndarray, rng: np.random.Generator, timings: dict[str, float],
+                    generations: int) -> list[np.ndarray]:
     """Every ``config.recheck`` frames and on a young track's :data:`YOUNG_RECHECKS` frames,
     the start's facings refitted from the detection on a quarter of the frame's ``generations``:
     they join the swarm as particles, so a track locked in a wrong facing or limb configuration is

@@ -9,6 +9,8 @@ mid-hip (at its rest angles) on the lifted mid-hip. The joint angles are the cal
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -41,6 +43,14 @@ def _upright_torso(body: SkinnedBody, across: np.ndarray) -> np.ndarray:
     return length * up / max(np.linalg.norm(up), 1e-9)
 
 
+def torso_enough(found: Iterable[str], pairs: bool = True) -> bool:
+    """Whether the joints named in ``found`` hold enough of the torso to start a track: three of
+    the four torso joints (hips, shoulders), or with ``pairs`` both shoulders or both hips."""
+    torso = set(found) & set(TORSO)
+    both = [f"left_{j}" in torso and f"right_{j}" in torso for j in ("shoulder", "hip")]
+    return len(torso) >= 3 or (pairs and any(both))
+
+
 def torso_pose(body: SkinnedBody, lifted: dict[str, np.ndarray], angles: np.ndarray,
                upright: bool = True) -> np.ndarray | None:
     """A (36,) pose whose torso matches lifted joints {name: (3,) m}, or None when fewer than
@@ -56,7 +66,7 @@ def torso_pose(body: SkinnedBody, lifted: dict[str, np.ndarray], angles: np.ndar
     pts = {k: np.asarray(v, float) for k, v in lifted.items() if k in TORSO and np.all(np.isfinite(v))}
     shoulders = upright and "left_shoulder" in pts and "right_shoulder" in pts
     hips = upright and "left_hip" in pts and "right_hip" in pts
-    if len(pts) < 3 and not (shoulders or hips):
+    if not torso_enough(pts, upright):
         return None
     lefts = [pts[f"left_{j}"] - pts[f"right_{j}"] for j in ("hip", "shoulder")
              if f"left_{j}" in pts and f"right_{j}" in pts]
