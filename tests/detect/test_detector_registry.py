@@ -168,8 +168,11 @@ def test_a_network_not_in_any_models_folder_names_the_folders_and_the_fix(tmp_pa
 
 
 def test_auto_replays_recorded_detections_and_otherwise_runs_a_network(sequence, tmp_path, monkeypatch):
-    """auto: the synth sequence's recorded detections; a source without them (a still frame) gets MoveNet,
-    or, where MoveNet is in no models folder, an error that says so rather than the simulated detector."""
+    """auto: the synth sequence's recorded detections; a source without them (a still frame), or whose
+    skeleton is what the run is measured against (UTD-MHAD), gets MoveNet, or, where MoveNet is in no
+    models folder, an error that says so rather than the simulated detector."""
+    from swarmpose.sources.utdmhad import UtdMhadSource
+
     assert make_detector("auto", _sequence_source(sequence)).name == "simulated"
     if not ASSETS.is_dir():
         pytest.skip(f"shared assets absent ({ASSETS}): the real Kinect frame is needed")
@@ -179,6 +182,11 @@ def test_auto_replays_recorded_detections_and_otherwise_runs_a_network(sequence,
         detector = make_detector("auto", still)
         assert detector.path.name == MOVENET.name
         detector.close()
+        utd = UtdMhadSource(ASSETS / "rgbd" / "utd_mhad" / "depth" / "a1_s1_t1_depth.mat")
+        detector = make_detector("auto", utd)
+        assert detector.path.name == MOVENET.name
+        detector.close()
+        assert make_detector("simulated", utd).name == "simulated"  # asked for by name: the skeleton plus noise
         monkeypatch.setenv("SWARMPOSE_MODELS", str(tmp_path))
         monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path))
         monkeypatch.setenv("SWARMPOSE_ASSETS", str(tmp_path))

@@ -74,8 +74,10 @@ def find_network(name: str, models: str = "") -> Path:
 
 
 def has_recorded_detections(source) -> bool:
-    """Whether ``source`` carries detections the simulated detector can replay (a synth sequence, UTD-MHAD)."""
-    return getattr(source, "ground_truth", None) is not None
+    """Whether ``auto`` replays ``source``'s recorded detections: a synthetic sequence's truth plus
+    noise (the simulated detector). A source whose ground truth is a measurement to evaluate
+    against (``replays_detections`` False: UTD-MHAD's Kinect skeleton) gets a network instead."""
+    return getattr(source, "ground_truth", None) is not None and getattr(source, "replays_detections", True)
 
 
 def _split_options(spec: str, rest: str, allowed: dict[str, type]) -> tuple[str, dict]:
@@ -97,7 +99,8 @@ def _split_options(spec: str, rest: str, allowed: dict[str, type]) -> tuple[str,
 
 
 def resolve_detector(spec: str, source=None) -> str:
-    """``spec`` with ``auto`` made concrete: ``simulated`` for a source with recorded detections, else ``movenet``."""
+    """``spec`` with ``auto`` made concrete: ``simulated`` for a source whose recorded detections ``auto``
+    replays (:func:`has_recorded_detections`), else ``movenet``."""
     spec = spec.strip()
     if spec != "auto":
         return spec
@@ -110,8 +113,8 @@ def detector_note(requested: str, detector: Detector) -> str:
     path = getattr(detector, "path", None)
     text = f"2D joints: {getattr(detector, 'name', type(detector).__name__)}" + (f" ({path})" if path else "")
     if requested.strip() == "auto" and getattr(detector, "name", "") == "simulated":
-        text += (": the detections the source recorded (--detector auto picks them on a source that has them: "
-                 "the sequence's own truth plus noise, not a network; pass --detector movenet to run one)")
+        text += (": the detections the source recorded (--detector auto picks them on a synthetic sequence: "
+                 "its own truth plus noise, not a network; pass --detector movenet to run one)")
     return text
 
 

@@ -168,7 +168,11 @@ class UtdMhadSource(FrameSource):
     Attributes beyond :class:`FrameSource`'s: ``intrinsics``, ``ground_truth`` (the skeleton
     ``lag_frames`` behind, in time with the depth), ``skeleton`` (F, 20, 3) the file's Kinect
     joints in our camera frame as paired in the file, ``depth_file``, ``skeleton_file``.
+    ``replays_detections`` is False: the skeleton is what a run is measured against, so
+    ``--detector auto`` runs a network on the shaded depth rather than replay it (``simulated`` does).
     """
+
+    replays_detections = False
 
     def __init__(self, path: str | Path, uri: str | None = None, lag_frames: float = DEPTH_LAG_FRAMES):
         self.lag_frames = check_lag(lag_frames, str(path))
