@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from swarmpose.core.open3d_import import open3d
+
 
 def smooth_min(a: np.ndarray, b: np.ndarray, k: float) -> np.ndarray:
     """Polynomial smooth minimum of two distance fields, blend radius ``k``."""
@@ -123,7 +125,7 @@ def mesh_field(values: np.ndarray, origin: np.ndarray, resolution: float,
     ``values`` (nx, ny, nz) and ``origin`` (3,) m as from :func:`sample_field`, sampled
     every ``resolution`` m; meshes above ``target_triangles`` triangles are decimated to it.
     """
-    import open3d as o3d
+    o3d = open3d()
     from skimage.measure import marching_cubes
 
     verts, faces, _, _ = marching_cubes(values, 0.0, spacing=(resolution,) * 3, allow_degenerate=False)

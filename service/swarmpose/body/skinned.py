@@ -23,6 +23,7 @@ from swarmpose.body.kinematics import (
 )
 from swarmpose.body.skeleton import JOINT_INDEX, POINT_NAMES, TRACKING_JOINTS
 from swarmpose.core.errors import AssetError, ConfigError, ShapeError, check_shape
+from swarmpose.core.open3d_import import open3d
 
 MAX_INFLUENCES = 4
 MIN_LOD_TRIANGLES = 100
@@ -189,7 +190,7 @@ class SkinnedBody:
                               f"got {triangles}")
         if triangles >= len(self.triangles):
             return self
-        import open3d as o3d
+        o3d = open3d()
         from scipy.spatial import cKDTree
 
         mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.array(self.vertices, dtype=np.float64)),

@@ -36,6 +36,7 @@ import numpy as np
 
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError, ShapeError
+from swarmpose.core.open3d_import import open3d
 
 UP_IN_CAMERA = np.array([0.0, -1.0, 0.0])
 """The camera's up direction (OpenCV axes: y points down)."""
@@ -185,7 +186,7 @@ def fit_floor(depth_m: np.ndarray, intrinsics: Intrinsics, **tuning) -> FloorPla
     """The floor plane of a depth image (H, W) m (0 or NaN = no measurement), or None where
     no plane passes the floor tests (see the module docstring; ``tuning`` overrides the
     fields of :class:`FloorTuning`)."""
-    import open3d as o3d
+    o3d = open3d()
 
     cfg = FloorTuning.from_kwargs(tuning)
     depth = check_depth(depth_m, intrinsics)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarmpose.core.errors import check_shape
+from swarmpose.core.open3d_import import open3d
 
 COUNT_NAMES = ("observed", "rendered", "both", "close")
 """Per-particle counts: observed tile pixels (d_o > 0), rendered pixels (whole tile),
@@ -47,7 +48,7 @@ def raycast_tiles(vertices: np.ndarray, triangles: np.ndarray, rays: np.ndarray)
     directions (see :meth:`TileBox.rays`), so the hit distance is the depth. One scene is
     built per mesh, as a per-hypothesis CPU renderer would.
     """
-    import open3d as o3d
+    o3d = open3d()
 
     check_shape("vertices", vertices, (None, None, 3))
     tris = o3d.core.Tensor(np.ascontiguousarray(triangles, dtype=np.uint32))

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 from swarmpose.body.shape_space import ShapeSpace
 from swarmpose.body.skinned import SkinnedBody
@@ -25,12 +26,14 @@ from swarmpose.detect.joints import Detector
 from swarmpose.personalise.auto_height import ESTIMATES as HEIGHT_ESTIMATES
 from swarmpose.personalise.auto_height import applies, height_fitting_tracker
 from swarmpose.personalise.online_personalise import personalising_tracker
-from swarmpose.pipeline.ensemble import EnsemblePipeline, ensemble_of
 from swarmpose.pipeline.features import refuse
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.pipeline.world import make_world
 from swarmpose.tracking.body_tracker import BodyTracker
 from swarmpose.tracking.config import TrackerConfig
+
+if TYPE_CHECKING:
+    from swarmpose.pipeline.ensemble import EnsemblePipeline
 
 TrackerFactory = Callable[[TrackerConfig, Intrinsics, int], BodyTracker]
 """(settings, camera, body id) -> the tracker of one person."""
@@ -81,4 +84,8 @@ def build_pipeline(driver: str, body: SkinnedBody, detector: Detector, tracker: 
                              personalise_frames=fitting_frames,
                              world=make_world(floor, coordinates) if seed == tracker.seed else None,
                              backward=tracker.backward, centred_sigma_s=tracker.centred_sigma_s)
+    if tracker.ensemble <= 1:
+        return member(tracker.seed)
+    from swarmpose.pipeline.ensemble import ensemble_of  # its imports (scipy.optimize) only for an ensemble
+
     return ensemble_of(member, tracker.seed, tracker.ensemble)

@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from swarmpose.body.loader import load_body
 from swarmpose.body.shape_space import shape_space_for
@@ -25,7 +26,6 @@ from swarmpose.detect.registry import detector_note, make_detector, resolve_dete
 from swarmpose.messages.build import info_message
 from swarmpose.pipeline.builder import build_pipeline
 from swarmpose.pipeline.config import ServiceConfig
-from swarmpose.pipeline.ensemble import EnsemblePipeline
 from swarmpose.pipeline.features import refuse
 from swarmpose.pipeline.status import HealthFileSink, LogSink, WorkerStats, latency_summary
 from swarmpose.pipeline.step import FramePipeline
@@ -38,6 +38,9 @@ from swarmpose.publish.zenoh_link import ZenohSink
 from swarmpose.sim.scoring import ScoreSink
 from swarmpose.sources.base import DeferredFrame, Frame, FrameSource, SkippedFrame
 from swarmpose.sources.registry import open_source
+
+if TYPE_CHECKING:
+    from swarmpose.pipeline.ensemble import EnsemblePipeline
 
 log = logging.getLogger(__name__)
 

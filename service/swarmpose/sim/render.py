@@ -16,6 +16,7 @@ import numpy as np
 
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import check_shape
+from swarmpose.core.open3d_import import open3d
 
 BODY_ALBEDO = np.array([0.87, 0.68, 0.55])
 PERSON_ALBEDOS = (
@@ -72,7 +73,7 @@ class Renderer:
     """Casts one ray per pixel of ``intrinsics`` at one or more body meshes plus an optional room."""
 
     def __init__(self, intrinsics: Intrinsics):
-        import open3d as o3d
+        o3d = open3d()
 
         self._o3d = o3d
         self.intrinsics = intrinsics

@@ -37,6 +37,7 @@ import numpy as np
 
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError, SourceError
+from swarmpose.core.open3d_import import open3d
 from swarmpose.sources.base import CAPTURE_RETRIES, Frame, FrameSource, SkippedFrame, exc_message, live_frames
 from swarmpose.sources.imagefiles import MILLIMETRES, check_pair, depth_to_metres, load_intrinsics
 
@@ -92,7 +93,7 @@ def rgbd_to_frame(rgbd, intrinsics: Intrinsics, depth_scale: float, index: int, 
 
 
 def _open3d():
-    import open3d as o3d
+    o3d = open3d()
     return o3d
 
 

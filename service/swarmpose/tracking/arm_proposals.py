@@ -36,6 +36,7 @@ import numpy as np
 
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
+from swarmpose.core.open3d_import import open3d
 from swarmpose.tracking.body_scene import body_scene
 from swarmpose.tracking.limb_flips import FLIP_LIMBS, MAX_MISS_M, limb_columns, solve_limbs
 
@@ -72,7 +73,7 @@ def surface_distance(scene, points: np.ndarray) -> np.ndarray:
     """(N,) m: the distance of each point (N, 3) m to the posed body of ``scene``
     (:func:`~swarmpose.tracking.body_scene.body_scene`; Open3D's exact point-to-triangle distance:
     a vertex's distance would miss by half the decimated mesh's 5-10 cm edges)."""
-    import open3d as o3d
+    o3d = open3d()
 
     return scene.compute_distance(o3d.core.Tensor(np.ascontiguousarray(points, np.float32))).numpy().astype(float)
 

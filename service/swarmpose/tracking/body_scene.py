@@ -7,12 +7,13 @@ from __future__ import annotations
 import numpy as np
 
 from swarmpose.body.skinned import SkinnedBody
+from swarmpose.core.open3d_import import open3d
 
 
 def body_scene(body: SkinnedBody, pose: np.ndarray):
     """An ``open3d.t.geometry.RaycastingScene`` holding ``body``'s mesh posed at ``pose`` (36,),
     camera frame, m (float32, as Open3D keeps it)."""
-    import open3d as o3d
+    o3d = open3d()
 
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(body.pose(np.asarray(pose, float)[None])[0], np.float32)),

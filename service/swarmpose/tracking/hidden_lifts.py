@@ -27,6 +27,7 @@ import numpy as np
 
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
+from swarmpose.core.open3d_import import open3d
 from swarmpose.tracking.body_scene import body_scene
 from swarmpose.tracking.lift import JOINT_RADIUS
 from swarmpose.tracking.objective import JointTargets
@@ -51,7 +52,7 @@ def hidden_lifts(body: SkinnedBody, pose: np.ndarray, targets: JointTargets, int
               if name in LIMB_JOINTS and np.all(np.isfinite(targets.xyz[i]))]
     if not tested:
         return out
-    import open3d as o3d
+    o3d = open3d()
 
     scene = body_scene(body, pose) if scene is None else scene
     names = [targets.names[i] for i in tested]
