@@ -174,15 +174,6 @@ def _yaw_clip(tmp_path, degrees, xs, frame_time: float = 0.1) -> BvhClip:
     return read_bvh(write(tmp_path, text))
 
 
-# ---------------------------------------------------------------------------- resampling
-def _yaw_clip(tmp_path, degrees, xs, frame_time: float = 0.1) -> BvhClip:
-    lines = "".join(f"{x} 0 0 {d} 0 0\n" for d, x in zip(degrees, xs, strict=True))
-    text = ("HIERARCHY\nROOT R\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Yrotation Xrotation "
-            "Zrotation\n End Site\n {\n  OFFSET 0 0 1\n }\n}\n"
-            f"MOTION\nFrames: {len(degrees)}\nFrame Time: {frame_time}\n{lines}")
-    return read_bvh(write(tmp_path, text))
-
-
 def _ry(deg: float) -> np.ndarray:
     a = np.radians(deg)
     return np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
@@ -308,8 +299,10 @@ FAMILIES = (
     ("LeftArm", "LeftForeArm", "LeftHand", "LeftUpLeg", "LeftLeg", "LeftFoot"),  # CMU MotionBuilder, Mixamo, rokoko
     ("LeftShoulder", "LeftElbow", "LeftWrist", "LeftHip", "LeftKnee", "LeftAnkle"),  # CMU 3dsMax
     ("UpArm_L", "LoArm_L", "Hand_L", "UpLeg_L", "LoLeg_L", "Foot_L"),  # old MakeHuman
+    ("lShldr", "lForeArm", "lHand", "lThigh", "lShin", "lFoot"),  # Daz-named CMU release
+    ("lhumerus", "lradius", "lhand", "lfemur", "ltibia", "lfoot"),  # CMU ASF names
 )
-Z_UP = ("animdrawings_fair1_", "makehuman_")
+Z_UP = ("animdrawings_fair1_", "makehuman_", "cmu_135_")
 
 
 def _chain_length(clip: BvhClip, top: int, bottom: int) -> float:
