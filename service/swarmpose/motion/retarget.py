@@ -45,9 +45,9 @@ from swarmpose.motion.clip_frame import ClipFrame, axis_vector, clip_frame, dete
 from swarmpose.motion.joint_map import MAP_HELP, JointMap, Roles, family_map, resolve_roles
 from swarmpose.motion.sequence import Motion
 
-# tracking joint -> (driving joint, pivot, child) by joint-map key; sided names get the side.
 log = logging.getLogger(__name__)
 
+# tracking joint -> (driving joint, pivot, child) by joint-map key; sided names get the side.
 _TRACKING_SEGMENTS = {
     "collar": ("collar", "collar", "shoulder"),
     "shoulder": ("shoulder", "shoulder", "elbow"),
