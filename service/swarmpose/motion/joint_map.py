@@ -77,6 +77,13 @@ FAMILIES: dict[str, dict[str, str]] = {
 }
 """Family label -> key -> BVH joint name (exact, case-sensitive)."""
 
+TORSO_UP_FAMILIES = ("CMU MotionBuilder / Mixamo", "CMU 3dsMax", "old MakeHuman")
+"""Families whose motion keeps the reference pose's torso (pelvis -> neck) as the world's up, as
+they were read before the file's own up axis was: the synthetic sequences every benchmark and
+regression bound was measured on stay as they were (levelling them tilts a clip's root by its
+reference pose's lean, 0.4-9 degrees, and turned the jumping jacks seen from behind into a mirrored
+track). The other families and a user's map are levelled on the file's up axis."""
+
 MAP_HELP = ("name your joints in a TOML file and pass it as FILE.bvh?map=names.toml: a [joints] table "
             f"with {', '.join(REQUIRED)} (optionally left_toe, right_toe) = your BVH joint names "
             "(docs/sources-and-detectors.md#your-own-mocap-naming)")

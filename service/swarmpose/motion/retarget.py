@@ -12,7 +12,9 @@ Method, per frame (vectorised over frames, a loop over the 14 joints):
    the reference pose is the zero pose, or the first frame, whichever stands upright along
    the up axis. Body axes from it: X = left hip - right hip, Y = pelvis -> neck, Z = X x Y;
    angles are measured there, and the root's rotation and motion are then turned into the
-   world, whose Y is the up axis (so the floor stays level however the reference leans).
+   world, whose Y is the up axis (so the floor stays level however the reference leans);
+   the families of :data:`~swarmpose.motion.joint_map.TORSO_UP_FAMILIES` keep the reference's
+   torso as the world's up.
    Lengths are only used as ratios (leg length of the body over that of the clip), so
    units cancel.
 2. Each tracking segment's canonical world rotation (relative to the T-pose) is the
@@ -42,7 +44,7 @@ from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.errors import MotionError
 from swarmpose.motion.bvh import BvhClip, read_bvh
 from swarmpose.motion.clip_frame import ClipFrame, axis_vector, clip_frame, detect_up, parse_units, parse_up
-from swarmpose.motion.joint_map import MAP_HELP, JointMap, Roles, family_map, resolve_roles
+from swarmpose.motion.joint_map import MAP_HELP, TORSO_UP_FAMILIES, JointMap, Roles, family_map, resolve_roles
 from swarmpose.motion.sequence import Motion
 
 log = logging.getLogger(__name__)
@@ -178,7 +180,8 @@ def retarget(clip: BvhClip, body: SkinnedBody, fps: float | None = None, options
     # measured; ``level`` turns those into the world's (Y the file's up axis). Units cancel below.
     lateral = rest[idx["left_hip"]] - rest[idx["right_hip"]]
     conv = _frame_from(lateral, rest[idx["neck"]] - rest[idx["pelvis"]]).T
-    level = _level_frame(lateral, reading.frame.up_vector).T @ conv.T
+    level = (np.eye(3) if reading.roles.source in TORSO_UP_FAMILIES
+             else _level_frame(lateral, reading.frame.up_vector).T @ conv.T)
     delta = conv @ (rot_f @ np.swapaxes(ref_rot, -1, -2)) @ conv.T  # (N, J, 3, 3) rotation from the reference
     gpos = pos_f @ conv.T  # (N, J, 3)
     ref = rest @ conv.T
