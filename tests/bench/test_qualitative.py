@@ -69,9 +69,11 @@ TWO_PEOPLE = ("depth-data-1399145206", "depth-data-82823944")
 def test_both_people_of_the_two_person_skeltrack_frames_are_tracked_and_nobody_else():
     """The two Skeltrack frames that hold two people give two ids, the ten others one. In frame
     1399145206 the second person's head is hidden by the first's raised hand and MoveNet scores
-    its shoulders 0.12-0.13, its hips 0.23 and 0.37: it starts on its own segment's depth from
-    the weaker keypoints (``START_MIN_SCORE``) and both hips; its fitted hips and shoulders land
-    on the far segment's pixels, not on the near person's."""
+    its shoulders 0.12-0.15, its hips 0.23-0.42: it starts on its own segment's depth from the
+    weaker keypoints (``START_MIN_SCORE``) and both hips; its fitted hips land on the far
+    segment's pixels and its hips and shoulders at the far person's depth, not on the near
+    person. (The shoulders' pixels are not checked: they lie behind the near person's arm, and
+    MoveNet's guesses of them move 10-20 px when the person's crop moves 2 px.)"""
     from swarmpose.bench.qualitative import SKELTRACK
     from swarmpose.detect.people import segment_people
 
@@ -88,15 +90,17 @@ def test_both_people_of_the_two_person_skeltrack_frames_are_tracked_and_nobody_e
     assert counts == {name: 2 if name in TWO_PEOPLE else 1 for name in names}, counts
     frame, result = hidden
     segmentation = segment_people(frame.depth, frame.intrinsics)
-    far = max(range(len(segmentation.people)), key=lambda k: segmentation.people[k].centroid_m[2])
-    mask = segmentation.labels == far + 1
+    near, far = sorted(segmentation.people, key=lambda p: p.centroid_m[2])
+    mask = far.mask
     body = max(result.bodies, key=lambda b: float(b.joints3d[:, 2].mean()))
-    on = []
-    for name in ("left_hip", "right_hip", "left_shoulder", "right_shoulder"):
+    for name in ("left_hip", "right_hip"):
         u, v = body.to_message()["joints"][name]["pixel"]
         u, v = int(np.clip(round(u), 0, 639)), int(np.clip(round(v), 0, 479))
-        on.append(bool(mask[max(v - 8, 0):v + 9, max(u - 8, 0):u + 9].any()))
-    assert sum(on) >= 3, on
+        assert mask[max(v - 8, 0):v + 9, max(u - 8, 0):u + 9].any(), name
+    assert near.centroid_m[2] + 0.4 < far.centroid_m[2]  # 1.28 and 1.89 m
+    for name in ("left_hip", "right_hip", "left_shoulder", "right_shoulder"):
+        z = body.joints[name].position_m[2]
+        assert near.centroid_m[2] + 0.4 < z < far.centroid_m[2] + 0.5, (name, z)
 
 
 @pytest.mark.slow

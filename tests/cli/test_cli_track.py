@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from swarmpose.body.loader import load_body
+from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.cli.main import main
 from swarmpose.core.errors import SourceError
 from swarmpose.detect.registry import make_detector
@@ -66,7 +67,7 @@ def test_eval_json_matches_an_independent_error(sequence, tmp_path, capsys):
     assert result["frames"] == 5 and result["mode"] == "hybrid" and set(result["A"]) == {str(t) for t in
                                                                                           range(20, 201, 20)}
     gt = load_ground_truth(sequence)
-    est = np.array([[j["position_m"] for j in json.loads(x)["bodies"][0]["joints"].values()]
+    est = np.array([[json.loads(x)["bodies"][0]["joints"][n]["position_m"] for n in EVAL_JOINTS]
                     for x in out.read_text().splitlines()])
     delta = 1000 * np.linalg.norm(est - gt.joints3d, axis=2).mean()
     assert result["mpjpe_mm"] == pytest.approx(delta, rel=1e-4)
