@@ -149,6 +149,22 @@ def test_position_channels_on_child_replace_its_offset(tmp_path):
     np.testing.assert_allclose(pos[0, 1], [0, 1, 0], atol=1e-12)
 
 
+def test_position_channels_holding_positions_in_the_roots_frame_become_offsets(tmp_path):
+    """CMU ASF conversions write where a joint is (the root's frame), not its offset: forward
+    kinematics must put it there. Hand-computed: the child is 1 unit up the root's turned Y axis
+    (frame 2: 1.1, a bone stretched)."""
+    text = ("HIERARCHY\nROOT R\n{\n OFFSET 0 0 0\n CHANNELS 4 Xposition Yposition Zposition Zrotation\n JOINT C\n"
+            " {\n  OFFSET 0 1 0\n  CHANNELS 3 Xposition Yposition Zposition\n  End Site\n  {\n   OFFSET 1 0 0\n  }\n"
+            " }\n}\nMOTION\nFrames: 3\nFrame Time: 0.1\n"
+            "0 0 0 0  0 1 0\n"
+            "10 0 0 90  9 0 0\n"
+            "5 5 5 0  5 6.1 5\n")
+    clip = read_bvh(write(tmp_path, text))
+    np.testing.assert_allclose(clip.local_translations[:, 1], [[0, 1, 0], [0, 1, 0], [0, 1.1, 0]], atol=1e-12)
+    _, pos = clip.global_transforms()
+    np.testing.assert_allclose(pos[:, 1], [[0, 1, 0], [9, 0, 0], [5, 6.1, 5]], atol=1e-12)
+
+
 # ---------------------------------------------------------------------------- resampling
 def _yaw_clip(tmp_path, degrees, xs, frame_time: float = 0.1) -> BvhClip:
     lines = "".join(f"{x} 0 0 {d} 0 0\n" for d, x in zip(degrees, xs, strict=True))
@@ -283,8 +299,10 @@ FAMILIES = (
     ("LeftArm", "LeftForeArm", "LeftHand", "LeftUpLeg", "LeftLeg", "LeftFoot"),  # CMU MotionBuilder, Mixamo, rokoko
     ("LeftShoulder", "LeftElbow", "LeftWrist", "LeftHip", "LeftKnee", "LeftAnkle"),  # CMU 3dsMax
     ("UpArm_L", "LoArm_L", "Hand_L", "UpLeg_L", "LoLeg_L", "Foot_L"),  # old MakeHuman
+    ("lShldr", "lForeArm", "lHand", "lThigh", "lShin", "lFoot"),  # Daz-named CMU release
+    ("lhumerus", "lradius", "lhand", "lfemur", "ltibia", "lfoot"),  # CMU ASF names
 )
-Z_UP = ("animdrawings_fair1_", "makehuman_")
+Z_UP = ("animdrawings_fair1_", "makehuman_", "cmu_135_")
 
 
 def _chain_length(clip: BvhClip, top: int, bottom: int) -> float:

@@ -37,10 +37,10 @@ def _interior_angles(p) -> np.ndarray:
     out = []
     torso = p("neck") - p("pelvis")
     for s in ("left", "right"):
-        out += [_angle(p(f"{s}_upper_arm") - p(f"{s}_forearm"), p(f"{s}_hand") - p(f"{s}_forearm")),
-                _angle(p(f"{s}_thigh") - p(f"{s}_shin"), p(f"{s}_foot") - p(f"{s}_shin")),
-                _angle(p(f"{s}_forearm") - p(f"{s}_upper_arm"), torso),
-                _angle(p(f"{s}_shin") - p(f"{s}_thigh"), torso)]
+        out += [_angle(p(f"{s}_shoulder") - p(f"{s}_elbow"), p(f"{s}_wrist") - p(f"{s}_elbow")),
+                _angle(p(f"{s}_hip") - p(f"{s}_knee"), p(f"{s}_ankle") - p(f"{s}_knee")),
+                _angle(p(f"{s}_elbow") - p(f"{s}_shoulder"), torso),
+                _angle(p(f"{s}_knee") - p(f"{s}_hip"), torso)]
     return np.stack(out, -1)
 
 
@@ -48,7 +48,7 @@ def _interior_angles(p) -> np.ndarray:
 def test_clip_retargets_with_matching_joint_angles(body, clip_name):
     from swarmpose.body.kinematics import matrix_to_quaternion
     from swarmpose.motion.bvh import read_bvh
-    from swarmpose.motion.retarget import _Roles, retarget
+    from swarmpose.motion.retarget import read_clip, retarget
 
     clip = read_bvh(clip_name).resample(30.0)
     motion = retarget(clip, body)
@@ -57,18 +57,11 @@ def test_clip_retargets_with_matching_joint_angles(body, clip_name):
     h = np.zeros((len(motion), 36))
     h[:, :3], h[:, 3:7], h[:, 7:] = motion.root_offset, matrix_to_quaternion(motion.root_rotation), motion.angles
     posed = dict(zip(POINTS, np.moveaxis(body.posed_points(h, POINTS), 1, 0)))
-    role_of = {"upper_arm": "shoulder", "forearm": "elbow", "hand": "wrist", "thigh": "hip", "shin": "knee",
-               "foot": "ankle"}
 
     def body_point(role: str) -> np.ndarray:
-        if role == "pelvis":
-            return posed["mid_hip"]
-        if role == "neck":
-            return posed["neck"]
-        side, part = role.split("_", 1)
-        return posed[f"{side}_{role_of[part]}"]
+        return posed["mid_hip" if role == "pelvis" else role]
 
-    idx = _Roles(clip).index
+    idx = read_clip(clip).roles.index
     _, positions = clip.global_transforms()
     clip_angles = _interior_angles(lambda role: positions[:, idx[role]])
     body_angles = _interior_angles(body_point)

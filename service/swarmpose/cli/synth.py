@@ -103,8 +103,10 @@ def add_synth_command(sub: argparse._SubParsersAction, common: argparse.Argument
     p = sub.add_parser("synth", parents=[common], formatter_class=DEFAULTS,
                        help="render a synthetic RGBD sequence with ground truth from a body and a motion")
     add_body_options(p)
-    p.add_argument("--motion", default=None, help="a BVH file (CMU, Mixamo or MakeHuman skeleton) or builtin:NAME "
-                                                  "(wave, squat, walk, turn, jumping_jacks)")
+    p.add_argument("--motion", default=None,
+                   help="a BVH file (CMU, Mixamo, MakeHuman, Daz or CMU ASF joint names; FILE.bvh?map=names.toml "
+                        "for your own naming, ?units=cm&up=z to state what is otherwise detected; "
+                        "docs/sources-and-detectors.md) or builtin:NAME (wave, squat, walk, turn, jumping_jacks)")
     p.add_argument("--person", action="append", default=[], metavar="SPEC",
                    help="a person of a scene, repeatable: BODY:SHAPE:MOTION[@x,z[,yaw[,start]]] (README)")
     p.add_argument("--scene", default=None, metavar="FILE",

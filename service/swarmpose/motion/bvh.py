@@ -23,6 +23,7 @@ import numpy as np
 
 from swarmpose.body.kinematics import matrix_to_quaternion, quaternion_to_matrix
 from swarmpose.core.errors import MotionError
+from swarmpose.motion.bvh_positions import local_translations
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 _FRAMES = re.compile(r"^frames\s*:\s*(\S+)\s*$", re.IGNORECASE)
@@ -43,7 +44,8 @@ class BvhClip:
     local_rotations: (N, J, 3, 3) rotation of each joint relative to its parent.
     local_translations: (N, J, 3) per-frame offsets for files whose non-root joints carry
     position channels (row 0 = root_positions; joints without channels keep their
-    offset), else None.
+    offset; channels holding positions in the root's frame are turned into offsets, see
+    :mod:`swarmpose.motion.bvh_positions`), else None.
     """
 
     name: str
@@ -382,7 +384,7 @@ def _build_clip(path: Path, joints: list[_Joint], ends: dict[int, np.ndarray], f
     offsets = np.stack([j.offset for j in joints])
     rotations = np.empty((n, count, 3, 3))
     translations = np.broadcast_to(offsets, (n, count, 3)).copy()
-    moved = False
+    positioned = np.zeros(count, dtype=bool)
     column = 0
     for k, joint in enumerate(joints):
         cols = np.arange(column, column + len(joint.channels))
@@ -393,7 +395,11 @@ def _build_clip(path: Path, joints: list[_Joint], ends: dict[int, np.ndarray], f
         for c, ch in zip(cols, joint.channels, strict=True):
             if ch.lower().endswith("position"):
                 translations[:, k, _AXES[ch[0].lower()]] = values[:, c]
-                moved = moved or k > 0
+                positioned[k] = True
+    moved = bool(positioned[1:].any())
+    if moved:  # a joint's channels may hold its position in the root's frame, not an offset
+        translations = local_translations(np.array([j.parent for j in joints]), offsets, rotations, translations,
+                                          positioned)
     return BvhClip(
         name=path.stem,
         joint_names=tuple(j.name for j in joints),

@@ -1,15 +1,20 @@
 """Retarget BVH motion capture onto a body's tracking skeleton.
 
-Supported skeleton families (recognised by their joint names): CMU MotionBuilder
-(LowerBack, LeftArm, LeftUpLeg, ...), CMU 3dsMax (LeftCollar, LeftShoulder = upper arm,
-LeftHip, LeftKnee, ...), Mixamo-like (Spine..Spine3, LeftArm, LeftUpLeg; with or without
-fingers) and the old MakeHuman skeleton (UpArm_L, LoLeg_L, ...).
+Skeleton families recognised by their joint names (:mod:`swarmpose.motion.joint_map`): CMU
+MotionBuilder and Mixamo-like (LeftArm, LeftUpLeg, ...), CMU 3dsMax (LeftCollar, LeftShoulder =
+upper arm, LeftHip, ...), the old MakeHuman skeleton (UpArm_L, LoLeg_L, ...), the Daz-named CMU
+release (lCollar, lShldr, lThigh, ...) and CMU's ASF names (lclavicle, lhumerus, lfemur, ...);
+any other naming through a user's joint map (:class:`ReadOptions`).
 
 Method, per frame (vectorised over frames, a loop over the 14 joints):
 
-1. The file's axes and units are read off its zero pose: X = left hip - right hip,
-   Y = pelvis -> neck (so Y-up and Z-up files both work), Z = X x Y; lengths are only
-   used as ratios (leg length of the body over that of the clip), so units cancel.
+1. The file's up axis and units are detected or stated (:mod:`swarmpose.motion.clip_frame`);
+   the reference pose is the zero pose, or the first frame, whichever stands upright along
+   the up axis. Body axes from it: X = left hip - right hip, Y = pelvis -> neck, Z = X x Y;
+   angles are measured there, and the root's rotation and motion are then turned into the
+   world, whose Y is the up axis (so the floor stays level however the reference leans).
+   Lengths are only used as ratios (leg length of the body over that of the clip), so
+   units cancel.
 2. Each tracking segment's canonical world rotation (relative to the T-pose) is the
    driving mocap joint's global rotation composed with the shortest arc from the T-pose
    direction to the clip's zero-pose direction, then turned minimally so the segment
@@ -25,6 +30,9 @@ to the body's leg length.
 
 from __future__ import annotations
 
+import logging
+from dataclasses import dataclass
+
 import numpy as np
 
 from swarmpose.body.joint_angles import TOPOLOGICAL_ORDER, clamp_joint, decompose_joint, joint_rotation
@@ -33,132 +41,144 @@ from swarmpose.body.skeleton import N_ANGLES, TRACKING_JOINTS, angle_offset
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.errors import MotionError
 from swarmpose.motion.bvh import BvhClip, read_bvh
+from swarmpose.motion.clip_frame import ClipFrame, axis_vector, clip_frame, detect_up, parse_units, parse_up
+from swarmpose.motion.joint_map import MAP_HELP, JointMap, Roles, family_map, resolve_roles
 from swarmpose.motion.sequence import Motion
 
-_SEGMENT_NAMES = {
-    # role: (CMU MotionBuilder / Mixamo, CMU 3dsMax, old MakeHuman); "{S}" = Left/Right, "{s}" = L/R
-    "collar": ("{S}Shoulder", "{S}Collar", "Clavicle_{s}"),
-    "upper_arm": ("{S}Arm", "{S}Shoulder", "UpArm_{s}"),
-    "forearm": ("{S}ForeArm", "{S}Elbow", "LoArm_{s}"),
-    "hand": ("{S}Hand", "{S}Wrist", "Hand_{s}"),
-    "thigh": ("{S}UpLeg", "{S}Hip", "UpLeg_{s}"),
-    "shin": ("{S}Leg", "{S}Knee", "LoLeg_{s}"),
-    "foot": ("{S}Foot", "{S}Ankle", "Foot_{s}"),
-    "toe": ("{S}ToeBase", "{S}Toe", "Toe_{s}"),
-}
-_FAMILIES = ("mb", "3dsmax", "makehuman")
+# tracking joint -> (driving joint, pivot, child) by joint-map key; sided names get the side.
+log = logging.getLogger(__name__)
 
-# tracking joint -> (driving segment, pivot segment, child segment); sided names get the side.
 _TRACKING_SEGMENTS = {
-    "collar": ("collar", "collar", "upper_arm"),
-    "shoulder": ("upper_arm", "upper_arm", "forearm"),
-    "elbow": ("forearm", "forearm", "hand"),
-    "hip": ("thigh", "thigh", "shin"),
-    "knee": ("shin", "shin", "foot"),
-    "ankle": ("foot", "foot", "toe"),
+    "collar": ("collar", "collar", "shoulder"),
+    "shoulder": ("shoulder", "shoulder", "elbow"),
+    "elbow": ("elbow", "elbow", "wrist"),
+    "hip": ("hip", "hip", "knee"),
+    "knee": ("knee", "knee", "ankle"),
+    "ankle": ("ankle", "ankle", "toe"),
 }
+_UPRIGHT_COS = np.cos(np.radians(45.0))
 
 
-def _family(names: set[str]) -> int:
-    if "LeftCollar" in names:
-        return _FAMILIES.index("3dsmax")
-    if "UpArm_L" in names:
-        return _FAMILIES.index("makehuman")
-    if "LeftArm" in names:
-        return _FAMILIES.index("mb")
-    raise MotionError("unknown BVH skeleton: expected CMU (LeftArm/LeftCollar), Mixamo (LeftArm) "
-                      f"or MakeHuman (UpArm_L) joint names, found {sorted(names)[:12]}...")
+@dataclass(frozen=True)
+class ReadOptions:
+    """How to read a clip. joint_map: the names to use (None: recognise a known family);
+    units, up: as the user states them (None: the map file's, else detected); see
+    :mod:`swarmpose.motion.clip_frame`."""
+
+    joint_map: JointMap | None = None
+    units: str | None = None
+    up: str | None = None
 
 
-class _Roles:
-    """Indices of the clip's joints for every role the retargeting needs."""
+@dataclass(frozen=True)
+class ClipReading:
+    """A clip's skeleton as retargeting reads it.
 
-    def __init__(self, clip: BvhClip):
-        names = list(clip.joint_names)
-        fam = _family(set(names))
-        self.index: dict[str, int] = {}
-        missing = []
-        for role, patterns in _SEGMENT_NAMES.items():
-            for side, s in (("left", "L"), ("right", "R")):
-                name = patterns[fam].format(S=side.capitalize(), s=s)
-                if name in names:
-                    self.index[f"{side}_{role}"] = names.index(name)
-                elif role != "toe":
-                    missing.append(name)
-        for role, name in (("head", "Head"), ("neck", "Neck" if fam != 1 else "lowerneck")):
-            if name in names:
-                self.index[role] = names.index(name)
-            else:
-                missing.append(name)
-        if missing:
-            raise MotionError(f"BVH {clip.name}: joints {missing} not found; the clip's skeleton is not one of "
-                              "the supported families (CMU, Mixamo, MakeHuman)")
-        # The pelvis is the common ancestor of both thighs; the spine runs from it to the neck.
-        chain = self._ancestors(clip, self.index["neck"])
-        left = set(self._ancestors(clip, self.index["left_thigh"]))
-        pelvis = next(j for j in chain if j in left)
-        self.index["pelvis"] = pelvis
-        spine = chain[:chain.index(pelvis)][::-1]  # pelvis-exclusive, bottom -> top, ends at the neck
-        if len(spine) < 2:
-            raise MotionError(f"BVH {clip.name}: no spine joint between the pelvis and the neck")
-        self.index["spine_base"] = spine[0]
-        self.index["spine_top"] = spine[-2]
+    roles: the joint of every map key (the toes may be End Sites appended after the clip's
+    joints). frame: its up axis and units. rotations (N, K, 3, 3), positions (N, K, 3): global
+    transforms, file units, K >= J with the End-Site toes. reference_positions (K, 3),
+    reference_rotations (K, 3, 3): the standing pose the motion is measured from (the zero pose,
+    or the first frame when the zero pose does not stand upright along the up axis).
+    """
 
-    @staticmethod
-    def _ancestors(clip: BvhClip, j: int) -> list[int]:
-        out = []
-        while j >= 0:
-            out.append(j)
-            j = int(clip.parents[j])
-        return out
+    roles: Roles
+    frame: ClipFrame
+    rotations: np.ndarray
+    positions: np.ndarray
+    reference_positions: np.ndarray
+    reference_rotations: np.ndarray
 
 
 def _frame_from(lateral: np.ndarray, up: np.ndarray) -> np.ndarray:
-    """Rotations (..., 3, 3) whose columns are X = lateral, Y = up (orthogonalised), Z = X x Y."""
-    x = lateral / np.linalg.norm(lateral, axis=-1, keepdims=True)
-    y = up - np.sum(up * x, axis=-1, keepdims=True) * x
-    y /= np.linalg.norm(y, axis=-1, keepdims=True)
+    """The rotation (3, 3) whose columns are X = ``lateral``, Y = ``up`` made orthogonal to it, Z = X x Y."""
+    x = lateral / np.linalg.norm(lateral)
+    y = up - (up @ x) * x
+    y = y / np.linalg.norm(y)
     return np.stack([x, y, np.cross(x, y)], axis=-1)
 
 
-def _is_standing(rest: np.ndarray, idx: dict[str, int]) -> bool:
-    """True when joint positions (J, 3) look like an upright person: hips apart, torso across them."""
-    lateral = rest[idx["left_thigh"]] - rest[idx["right_thigh"]]
-    up = rest[idx["neck"]] - rest[idx["pelvis"]]
-    ln, un = np.linalg.norm(lateral), np.linalg.norm(up)
-    return bool(ln > 1e-6 * max(un, 1.0) and un > 1e-9 and abs(lateral @ up) < 0.5 * ln * un)
+def _level_frame(lateral: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """The rotation (3, 3) whose columns are X = ``lateral`` levelled (its ``up`` part removed),
+    Y = ``up`` (a unit vector) exactly, Z = X x Y."""
+    x = lateral - (lateral @ up) * up
+    x = x / np.linalg.norm(x)
+    return np.stack([x, up, np.cross(x, up)], axis=-1)
 
 
-def retarget(clip: BvhClip, body: SkinnedBody, fps: float | None = None) -> Motion:
-    """The clip as a :class:`Motion` of ``body``'s tracking skeleton, resampled to ``fps``.
+def _is_standing(pose: np.ndarray, idx: dict[str, int], up: np.ndarray) -> bool:
+    """True when joint positions (K, 3) look like an upright person along ``up`` (3,): hips apart,
+    the torso across them and within 45 degrees of ``up``."""
+    lateral = pose[idx["left_hip"]] - pose[idx["right_hip"]]
+    torso = pose[idx["neck"]] - pose[idx["pelvis"]]
+    ln, un = np.linalg.norm(lateral), np.linalg.norm(torso)
+    return bool(ln > 1e-6 * max(un, 1.0) and un > 1e-9 and abs(lateral @ torso) < 0.5 * ln * un
+                and torso @ up > _UPRIGHT_COS * un)
 
-    The reference pose is the clip's zero pose, or its first frame when the zero pose is
-    not an upright person (some exporters put every offset along one axis).
+
+def read_clip(clip: BvhClip, options: ReadOptions | None = None) -> ClipReading:
+    """The clip's roles, up axis, units and reference pose (see :class:`ClipReading`).
+
+    Raises MotionError when its joints cannot be mapped (naming those it lacks), when a foot has
+    neither a toe joint nor an End Site, or when neither its zero pose nor its first frame stands
+    upright along its up axis.
     """
-    if fps is not None:
-        clip = clip.resample(fps)
-    idx = _Roles(clip).index
+    options = options or ReadOptions()
+    joint_map = options.joint_map or family_map(clip.joint_names, clip.name)
+    roles = resolve_roles(clip.joint_names, clip.parents, joint_map, clip.name)
+    idx = dict(roles.index)
     rot_f, pos_f = clip.global_transforms()
     rest = clip.rest_positions()
+    ends = [rest[j] + e for j, e in clip.end_offsets.items()]
+    ends_0 = [pos_f[0, j] + rot_f[0, j] @ e for j, e in clip.end_offsets.items()]
     for side in ("left", "right"):  # feet without a toe joint: use the foot's end site
         if f"{side}_toe" not in idx:
-            foot = idx[f"{side}_foot"]
+            foot = idx[f"{side}_ankle"]
             if foot not in clip.end_offsets:
-                raise MotionError(f"BVH {clip.name}: no toe joint or end site below the {side} foot")
+                raise MotionError(f"BVH {clip.name}: no toe joint or end site below the {side} ankle; "
+                                  f"map {side}_toe to a joint below it ({MAP_HELP})")
             end = pos_f[:, foot] + rot_f[:, foot] @ clip.end_offsets[foot]
             pos_f = np.concatenate([pos_f, end[:, None]], axis=1)
             rot_f = np.concatenate([rot_f, rot_f[:, foot, None]], axis=1)
             rest = np.concatenate([rest, (rest[foot] + clip.end_offsets[foot])[None]])
             idx[f"{side}_toe"] = pos_f.shape[1] - 1
-    if _is_standing(rest, idx):
-        ref_rot = np.broadcast_to(np.eye(3), rot_f.shape[1:])
+    where = f"BVH {clip.name}"
+    stated_up = options.up or joint_map.up
+    stated_units = options.units or joint_map.units
+    up = (parse_up(stated_up, where) if stated_up else
+          detect_up(pos_f[:, idx["head"]], pos_f[:, idx["left_ankle"]], pos_f[:, idx["right_ankle"]]))
+    if _is_standing(rest, idx, axis_vector(up)):
+        ref_pos, ref_rot, points = rest, np.broadcast_to(np.eye(3), rot_f.shape[1:]), [rest, *ends]
+    elif _is_standing(pos_f[0], idx, axis_vector(up)):
+        ref_pos, ref_rot, points = pos_f[0], rot_f[0], [pos_f[0], *ends_0]
     else:
-        rest, ref_rot = pos_f[0], rot_f[0]
-        if not _is_standing(rest, idx):
-            raise MotionError(f"BVH {clip.name}: neither its zero pose nor its first frame is an upright "
-                              "person; cannot tell its up axis")
-    # File axes -> world (X left, Y up, Z forward) from the reference pose; units cancel below.
-    conv = _frame_from(rest[idx["left_thigh"]] - rest[idx["right_thigh"]], rest[idx["neck"]] - rest[idx["pelvis"]]).T
+        how = "stated" if stated_up else "where its head is above its feet in most frames"
+        raise MotionError(f"{where}: neither its zero pose nor its first frame is a person standing upright along "
+                          f"{up} ({how}); state its up axis (?up=y or ?up=z)")
+    frame = clip_frame(np.vstack(points), up, bool(stated_up),
+                       parse_units(stated_units, where) if stated_units else None, where)
+    return ClipReading(Roles(idx, roles.source), frame, rot_f, pos_f, ref_pos, ref_rot)
+
+
+def retarget(clip: BvhClip, body: SkinnedBody, fps: float | None = None, options: ReadOptions | None = None) -> Motion:
+    """The clip as a :class:`Motion` of ``body``'s tracking skeleton, resampled to ``fps``.
+
+    The reference pose is the clip's zero pose, or its first frame when the zero pose is
+    not an upright person (some exporters put every offset along one axis); see :func:`read_clip`.
+    """
+    if fps is not None:
+        clip = clip.resample(fps)
+    reading = read_clip(clip, options)
+    idx = reading.roles.index
+    rot_f, pos_f = reading.rotations, reading.positions
+    rest, ref_rot = reading.reference_positions, reading.reference_rotations
+    log.info("%s: %s skeleton, %s up (%s), %s (%s), %.2f m tall", clip.name, reading.roles.source, reading.frame.up,
+             "stated" if reading.frame.up_stated else "detected", reading.frame.units,
+             "stated" if reading.frame.units_stated else "detected", reading.frame.height_m)
+    # File axes -> the reference's body axes (X left, Y pelvis -> neck, Z forward), where angles are
+    # measured; ``level`` turns those into the world's (Y the file's up axis). Units cancel below.
+    lateral = rest[idx["left_hip"]] - rest[idx["right_hip"]]
+    conv = _frame_from(lateral, rest[idx["neck"]] - rest[idx["pelvis"]]).T
+    level = _level_frame(lateral, reading.frame.up_vector).T @ conv.T
     delta = conv @ (rot_f @ np.swapaxes(ref_rot, -1, -2)) @ conv.T  # (N, J, 3, 3) rotation from the reference
     gpos = pos_f @ conv.T  # (N, J, 3)
     ref = rest @ conv.T
@@ -166,7 +186,7 @@ def retarget(clip: BvhClip, body: SkinnedBody, fps: float | None = None) -> Moti
 
     # Root: the pelvis rotation from the reference, turned so its X axis runs along the hips.
     w_root = delta[:, idx["pelvis"]]
-    w_root = shortest_arc(w_root[:, :, 0], gpos[:, idx["left_thigh"]] - gpos[:, idx["right_thigh"]]) @ w_root
+    w_root = shortest_arc(w_root[:, :, 0], gpos[:, idx["left_hip"]] - gpos[:, idx["right_hip"]]) @ w_root
 
     segments: dict[str, tuple[str, str, str]] = {"spine": ("spine_top", "spine_base", "neck"),
                                                   "neck": ("head", "neck", "head")}
@@ -201,19 +221,21 @@ def retarget(clip: BvhClip, body: SkinnedBody, fps: float | None = None) -> Moti
 
     # Root motion relative to the first frame, scaled by leg length (synth floors the sequence).
     def leg(p: np.ndarray) -> float:
-        return float(np.linalg.norm(p[idx["left_shin"]] - p[idx["left_thigh"]])
-                     + np.linalg.norm(p[idx["left_foot"]] - p[idx["left_shin"]]))
+        return float(np.linalg.norm(p[idx["left_knee"]] - p[idx["left_hip"]])
+                     + np.linalg.norm(p[idx["left_ankle"]] - p[idx["left_knee"]]))
 
     body_leg = float(np.linalg.norm(body.point("left_knee") - body.point("left_hip"))
                      + np.linalg.norm(body.point("left_ankle") - body.point("left_knee")))
     scale = body_leg / max(leg(ref), 1e-9)
-    offset = gpos[:, idx["pelvis"]] - gpos[0, idx["pelvis"]]
+    # In the world the floor is level however the reference's torso leans (else a long walk climbs or sinks).
+    offset = (gpos[:, idx["pelvis"]] - gpos[0, idx["pelvis"]]) @ level.T
+    w_root = level @ w_root
     fwd = w_root[0, :, 2]  # face +Z at the first frame
     turn = axis_angle_matrix((0.0, 1.0, 0.0), -np.arctan2(fwd[0], fwd[2]))
     return Motion(name=clip.name, fps=clip.fps, root_offset=scale * offset @ turn.T,
                   root_rotation=turn @ w_root, angles=angles)
 
 
-def load_motion(path: str, body: SkinnedBody, fps: float | None = None) -> Motion:
+def load_motion(path: str, body: SkinnedBody, fps: float | None = None, options: ReadOptions | None = None) -> Motion:
     """Read a BVH file and retarget it onto ``body`` (see :func:`retarget`)."""
-    return retarget(read_bvh(path), body, fps)
+    return retarget(read_bvh(path), body, fps, options)
