@@ -12,9 +12,10 @@ import jsonschema
 import numpy as np
 import pytest
 from conftest import REPO
+from scipy.spatial.transform import Rotation
 
 from swarmpose.body.loader import load_body
-from swarmpose.body.skeleton import EVAL_JOINTS, EVAL_LINKS, neutral_pose
+from swarmpose.body.skeleton import EVAL_JOINTS, neutral_pose
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError, ProtocolError
 from swarmpose.core.world import WorldState
@@ -29,7 +30,7 @@ from swarmpose.messages import (
     schema,
     validate,
 )
-from swarmpose.tracking.result import BodyResult
+from swarmpose.tracking.result import BodyResult, posed_skeleton
 
 
 def body_entry(result: BodyResult, body_id: int = 0) -> dict:
@@ -47,7 +48,8 @@ def a_result(state: str = "tracking") -> BodyResult:
     joints3d[6] = np.nan   # an unknown joint
     return BodyResult(id=0, state=state, reason="", pose=h, joints3d=joints3d,
                        joints2d=joints2d, confidence=np.linspace(0, 1, len(EVAL_JOINTS)),
-                       objective={"E": 12.5, "E_D": 3.0, "E_J": 3.5}, timings_ms={"pso": 410.0})
+                       objective={"E": 12.5, "E_D": 3.0, "E_J": 3.5}, timings_ms={"pso": 410.0},
+                       skeleton=posed_skeleton(body, h, intr))
 
 
 def test_the_schemas_are_valid_draft_2020_12():
@@ -103,8 +105,14 @@ def test_info_message_describes_skeleton_pose_and_camera():
     validate(info)
     assert info["keys"] == keys("cam0") == {"frame": "swarmpose/cam0/frame", "status": "swarmpose/cam0/status",
                                             "alive": "swarmpose/cam0/alive", "info": "swarmpose/cam0/info"}
-    assert info["skeleton"]["links"] == [list(x) for x in EVAL_LINKS]
-    assert all(a in EVAL_JOINTS and b in EVAL_JOINTS for a, b in EVAL_LINKS)
+    skeleton = info["skeleton"]
+    assert len(skeleton["joints"]) == 28 and skeleton["evaluation_joints"] == list(EVAL_JOINTS)
+    assert set(EVAL_JOINTS) <= set(skeleton["joints"]) and skeleton["parents"][0] is None  # pelvis, the root
+    parent = dict(zip(skeleton["joints"], skeleton["parents"]))
+    assert [parent[j] for j in ("left_wrist", "left_elbow", "left_shoulder", "left_clavicle", "spine_chest",
+                                "spine_navel")] == ["left_elbow", "left_shoulder", "left_clavicle", "spine_chest",
+                                                    "spine_navel", "pelvis"]
+    assert skeleton["links"] == [[p, c] for c, p in parent.items() if p is not None]
     assert info["pose_vector"]["names"][7] == "neck.roll" and len(info["pose_vector"]["limits_rad"]) == 29
     assert info["intrinsics"]["fx"] == 525.0 and info["body"]["bones"] == len(body.bone_names)
     validate(info_message("cam0"))          # before the first frame: no intrinsics, no body yet
@@ -149,3 +157,60 @@ def test_frame_messages_say_their_coordinates_and_carry_the_world_transform():
     assert info["world"]["floor"]["pitch_deg"] == pytest.approx(10.0)
     assert info["skeleton"]["frame"].startswith("world")
     assert validate(info_message("cam0"))["world"] == {"coordinates": "camera", "floor": None, "camera_to_world": None}
+
+
+def test_every_joint_of_the_full_set_has_a_unit_orientation_and_the_14_keep_their_values():
+    result = a_result()
+    message = validate(frame_message("cam0", 0, 0, 0, 0, [body_entry(result)]))
+    joints = message["bodies"][0]["joints"]
+    assert len(joints) == 28 and set(EVAL_JOINTS) <= set(joints)
+    for e, name in enumerate(EVAL_JOINTS):  # positions, pixels and confidences as version 4 had them
+        want = None if not np.all(np.isfinite(result.joints3d[e])) else pytest.approx(result.joints3d[e], abs=1e-6)
+        assert joints[name]["position_m"] == want
+        assert joints[name]["confidence"] == pytest.approx(result.confidence[e], abs=1e-3)
+    for name, joint in joints.items():
+        assert np.linalg.norm(joint["orientation_xyzw"]) == pytest.approx(1.0, abs=1e-5), name
+        assert joint["orientation_xyzw"][3] >= 0
+    # the neutral pose faces the camera: every frame is the root's, 180 degrees about x
+    assert joints["left_elbow"]["orientation_xyzw"] == pytest.approx([1.0, 0.0, 0.0, 0.0], abs=1e-6)
+    assert joints["pelvis"]["position_m"] == pytest.approx(result.pose[:3], abs=1e-6)
+    api = result.joints
+    assert list(api) == list(joints) and api["left_hand"].orientation_xyzw == pytest.approx([1.0, 0.0, 0.0, 0.0])
+    assert api["left_wrist"].position_m is None and api["left_wrist"].orientation_xyzw is not None
+
+
+def test_a_body_without_a_pose_has_null_orientations_and_no_extra_joints():
+    result = replace(a_result(), pose=None, skeleton=None)
+    joints = validate(frame_message("cam0", 0, 0, 0, 0, [body_entry(result)]))["bodies"][0]["joints"]
+    assert all(j["orientation_xyzw"] is None for j in joints.values())
+    assert joints["head"]["position_m"] is not None  # the 14 as given (a lifted body: positions, no pose)
+    assert joints["pelvis"] == {"position_m": None, "orientation_xyzw": None, "pixel": None, "confidence": 0.0}
+
+
+def test_world_coordinates_turn_the_orientations_by_the_camera_rotation():
+    from swarmpose.core.world import normal_of_angles, world_from_floor
+    from swarmpose.tracking.result import FrameResult
+
+    body = replace(a_result(), pose=np.concatenate([[0.1, 0.2, 3.0], [0.9, 0.3, 0.2, 0.1], np.full(29, 0.1)]))
+    body = replace(body, skeleton=posed_skeleton(load_body("builtin"), body.pose, Intrinsics.kinect_v1()))
+    t = world_from_floor(normal_of_angles(10.0), 1.2, body.pose[0:3])
+    state = WorldState(t[1, :3], float(t[1, 3]), "depth", 900, t)
+    camera = FrameResult(3, 0, (body,), world=state).to_message("cam0")["bodies"][0]["joints"]
+    world = validate(FrameResult(3, 0, (body,), world=state, coordinates="world").to_message("cam0"))
+    world_joints = world["bodies"][0]["joints"]
+    turn = Rotation.from_matrix(t[:3, :3])
+    for name in ("pelvis", "left_elbow", "right_foot", "nose"):
+        want = (turn * Rotation.from_quat(camera[name]["orientation_xyzw"])).as_matrix()
+        got = Rotation.from_quat(world_joints[name]["orientation_xyzw"]).as_matrix()
+        np.testing.assert_allclose(got, want, atol=1e-5, err_msg=name)
+        assert world_joints[name]["position_m"] == pytest.approx(t[:3, :3] @ camera[name]["position_m"] + t[:3, 3],
+                                                                 abs=1e-5)
+
+
+def test_a_message_of_the_previous_version_is_refused_naming_the_version():
+    old = json.loads((REPO / "protocol" / "examples" / "frame.json").read_text())
+    old["version"] = 4
+    for joint in old["bodies"][0]["joints"].values():
+        joint.pop("orientation_xyzw")
+    with pytest.raises(ProtocolError, match="invalid at version"):
+        validate(old)

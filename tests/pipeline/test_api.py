@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 
 import swarmpose
+from swarmpose.body.joint_set import SKELETON_NAMES
+from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.cli.main import main
 from swarmpose.core.errors import ConfigError, ShapeError, SourceError
 from swarmpose.messages import validate
@@ -54,6 +56,11 @@ def test_track_gives_what_the_command_line_writes(wave_sequence, tmp_path):
         wrist = body.joints["left_wrist"]
         assert np.allclose(wrist.position_m, message["bodies"][0]["joints"]["left_wrist"]["position_m"], atol=1e-6)
         assert 0.0 <= wrist.confidence <= 1.0 and wrist.pixel.shape == (2,)
+        # the full set: the tracker's skeleton is its pose's (the 14 where joints3d are, the pelvis at tx ty tz)
+        assert len(body.joints) == 28 and body.joints["pelvis"].position_m == pytest.approx(body.pose[:3])
+        np.testing.assert_allclose(np.stack([body.joints[n].position_m for n in EVAL_JOINTS]),
+                                   body.skeleton.positions[[SKELETON_NAMES.index(n) for n in EVAL_JOINTS]], atol=1e-9)
+        assert all(abs(np.linalg.norm(j.orientation_xyzw) - 1) < 1e-9 for j in body.joints.values())
 
 
 @pytest.mark.slow

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.messages import validate
 from swarmpose.pipeline.velocity import BLEND, JointVelocities
 from swarmpose.tracking.result import BodyResult, FrameResult, lost_body
 
-J = 14
+J = len(EVAL_JOINTS)
 
 
 def _body(joints: np.ndarray, body_id: int = 0) -> BodyResult:
@@ -52,8 +53,9 @@ def test_the_message_carries_the_velocities_turned_into_the_world_frame():
     turn[:3, :3] = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]  # 90 degrees about z
     turn[:3, 3] = [5.0, 6.0, 7.0]  # a translation moves positions, not velocities
     message = body.to_message(turn)
-    names = list(message["joints"])
+    names = list(EVAL_JOINTS)  # the velocities' order; the message holds more joints, without velocities
     assert message["joints"][names[0]]["velocity_m_s"] == [-2.0, 1.0, 3.0]
     assert "velocity_m_s" not in message["joints"][names[4]]
     frame = FrameResult(0, 0, (body,)).to_message("cam", received_ns=1, publish_ns=2)
     validate(frame)
+    assert all("velocity_m_s" not in joint for name, joint in message["joints"].items() if name not in EVAL_JOINTS)

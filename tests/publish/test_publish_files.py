@@ -19,6 +19,7 @@ import pytest
 from conftest import MAKEHUMAN, needs_assets
 from scipy.spatial.transform import Rotation
 
+from swarmpose.body.joint_set import SKELETON_NAMES
 from swarmpose.body.kinematics import forward_kinematics, matrix_to_quaternion
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import ANGLE_LIMITS, EVAL_JOINTS
@@ -43,8 +44,14 @@ def entry(seed: int, pose: np.ndarray | None = None, state: str = "tracking", re
     joints2d = rng.uniform(0, 640, (14, 2))
     joints3d[list(unknown)] = np.nan
     joints2d[list(unknown)] = np.nan
+    skeleton = None
+    if pose is not None:  # the full set: random positions, pixels and unit quaternions
+        q = rng.normal(size=(len(SKELETON_NAMES), 4))
+        skeleton = (rng.uniform(-1, 1, (len(SKELETON_NAMES), 3)) + [0, 0, 3],
+                    rng.uniform(0, 640, (len(SKELETON_NAMES), 2)), q / np.linalg.norm(q, axis=1, keepdims=True))
     return body_message(body_id, state, reason, None if pose is None else np.asarray(pose, dtype=float),
-                        joints3d, joints2d, rng.uniform(0, 1, 14), {"E": float(rng.uniform(0, 5)), "E_D": 1.0})
+                        joints3d, joints2d, rng.uniform(0, 1, 14), {"E": float(rng.uniform(0, 5)), "E_D": 1.0},
+                        skeleton=skeleton)
 
 
 def message(index: int, bodies: list[dict], reason: str = "") -> dict:
@@ -87,9 +94,12 @@ def test_jsonl_lines_are_the_messages_and_on_disk_at_once(tmp_path):
 # ---------------------------------------------------------------------------- CSV
 def expected_header() -> list[str]:
     joints = [f"{j}_{f}" for j in EVAL_JOINTS for f in ("x", "y", "z", "u", "v", "confidence")]
+    extra = [f"{j}_{f}" for j in SKELETON_NAMES if j not in EVAL_JOINTS
+             for f in ("x", "y", "z", "u", "v", "confidence")]
+    quaternions = [f"{j}_{f}" for j in SKELETON_NAMES for f in ("qx", "qy", "qz", "qw")]
     return ["frame", "capture_ns", "received_ns", "publish_ns", "latency_ms", "coordinates", "body_id", "state",
             "reason",
-            *joints, *POSE_NAMES, "objective"]
+            *joints, *POSE_NAMES, "objective", *extra, *quaternions]
 
 
 def cell(value) -> str:
@@ -113,7 +123,7 @@ def test_csv_rows_hold_the_message_values(tmp_path):
         assert reader.fieldnames == expected_header()
         rows = list(reader)
     assert [int(r["frame"]) for r in rows] == [0, 1, 2, 2]  # one row per frame and body
-    assert len(expected_header()) == 9 + 14 * 6 + 36 + 1
+    assert len(expected_header()) == 9 + 14 * 6 + 36 + 1 + 14 * 6 + 28 * 4  # earlier columns first, in place
 
     # frame 1: no body -> one row, empty body cells, the frame's reason
     empty = rows[1]
@@ -130,8 +140,10 @@ def test_csv_rows_hold_the_message_values(tmp_path):
         assert float(row["latency_ms"]) == msg["latency_ms"]
         assert row["coordinates"] == msg["coordinates"] == "camera"
         assert int(row["body_id"]) == body["id"] and row["state"] == body["state"]
-        for name in EVAL_JOINTS:
+        for name in SKELETON_NAMES:
             joint = body["joints"][name]
+            got = [row[f"{name}_{f}"] for f in ("qx", "qy", "qz", "qw")]
+            assert [float(g) if g else None for g in got] == (joint["orientation_xyzw"] or [None] * 4)
             got = [row[f"{name}_{f}"] for f in ("x", "y", "z", "u", "v")]
             want = (joint["position_m"] or [None] * 3) + (joint["pixel"] or [None] * 2)
             assert [float(g) if g else None for g in got] == want

@@ -20,8 +20,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import free_port
+from scipy.spatial.transform import Rotation
 
-from swarmpose.body.skeleton import EVAL_JOINTS, EVAL_LINKS
+from swarmpose.body.joint_set import SKELETON_LINKS, SKELETON_NAMES
 from swarmpose.cli.main import main
 from swarmpose.core.polling import wait_until
 
@@ -67,18 +68,24 @@ def check_bodies(rows: dict[str, list[dict]], messages: list[dict]) -> None:
     bones = by_frame(rows["/world/bodies/0/bones"], "LineStrips3D:strips")
     confidence = by_frame(rows["/stats/confidence/0"], "Scalars:scalars")
     labels = by_frame(rows["/world/bodies/0/label"], "Points3D:labels")
+    arrows = by_frame(rows["/world/bodies/0/axes"], "Arrows3D:vectors")
+    origins = by_frame(rows["/world/bodies/0/axes"], "Arrows3D:origins")
     assert sorted(joints) == [m["frame"] for m in messages]
     for message in messages:
         body = message["bodies"][0]
         f = message["frame"]
-        expected = np.array([body["joints"][name]["position_m"] for name in EVAL_JOINTS], dtype=np.float32)
+        expected = np.array([body["joints"][name]["position_m"] for name in SKELETON_NAMES], dtype=np.float32)
         np.testing.assert_array_equal(np.asarray(joints[f], dtype=np.float32), expected)
-        assert keypoints[f] == list(range(len(EVAL_JOINTS)))
+        assert keypoints[f] == list(range(len(SKELETON_NAMES)))
         np.testing.assert_array_equal(np.asarray(pixels[f], dtype=np.float32),
-                                      np.array([body["joints"][n]["pixel"] for n in EVAL_JOINTS], np.float32))
+                                      np.array([body["joints"][n]["pixel"] for n in SKELETON_NAMES], np.float32))
         strips = np.asarray(bones[f], dtype=np.float32)
         link_ends = np.array([[body["joints"][a]["position_m"], body["joints"][b]["position_m"]]
-                              for a, b in EVAL_LINKS], dtype=np.float32)
+                              for a, b in SKELETON_LINKS], dtype=np.float32)
+        # each joint's axes: 8 cm along the columns of its quaternion's matrix (scipy's reading of x, y, z, w)
+        axes = Rotation.from_quat([body["joints"][n]["orientation_xyzw"] for n in SKELETON_NAMES]).as_matrix()
+        np.testing.assert_allclose(np.asarray(arrows[f]), 0.08 * np.swapaxes(axes, 1, 2).reshape(-1, 3), atol=1e-6)
+        np.testing.assert_allclose(np.asarray(origins[f]), np.repeat(expected, 3, axis=0), atol=1e-6)
         np.testing.assert_array_equal(strips, link_ends)
         mean = np.mean([j["confidence"] for j in body["joints"].values()])
         assert confidence[f] == pytest.approx([mean], abs=1e-12)

@@ -121,7 +121,7 @@ def test_a_plain_zenoh_subscriber_gets_valid_frames_status_info_and_liveliness(w
         assert len(replies) == 1
         info = json.loads(replies[0].payload.to_bytes())
         jsonschema.validate(info, SCHEMAS["info"])
-        assert info["intrinsics"]["width"] == 640 and info["skeleton"]["joints"][0] == "head"
+        assert info["intrinsics"]["width"] == 640 and info["skeleton"]["joints"][0] == "pelvis"
         assert wait_until(lambda: len(frames) == 6)
         decoded = [json.loads(p) for p, _ in frames]
         for message in decoded:

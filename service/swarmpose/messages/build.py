@@ -20,7 +20,15 @@ from importlib import metadata
 import numpy as np
 
 from swarmpose import __version__
-from swarmpose.body.skeleton import ANGLE_LIMITS, ANGLE_NAMES, EVAL_JOINTS, EVAL_LINKS
+from swarmpose.body.joint_set import (
+    SKELETON_INDEX,
+    SKELETON_LINKS,
+    SKELETON_NAMES,
+    SKELETON_PARENTS,
+    skeleton_confidence,
+)
+from swarmpose.body.skeleton import ANGLE_LIMITS, ANGLE_NAMES, EVAL_JOINTS
+from swarmpose.core.errors import check_shape
 from swarmpose.core.world import matrix_rows
 from swarmpose.messages.schema import MESSAGE_VERSIONS, PROTOCOL_VERSION, keys
 
@@ -30,6 +38,10 @@ CAMERA_FRAME = "camera (OpenCV: x right, y down, z forward)"
 WORLD_FRAME = ("world (floor-aligned: y up, floor at y = 0, x = the camera's x on the floor, z = x cross y; "
                "origin on the floor under the first tracked person's start); camera until known: see each "
                "frame's coordinates")
+ORIENTATION = ("orientation_xyzw: the unit quaternion [x, y, z, w] (w >= 0) turning the joint's own axes into the "
+               "message's coordinates; the joint's axes are the body's T-pose axes (x = the subject's left, "
+               "y = up, z = forward) carried along by the joint rotations from the pelvis down to the joint's "
+               "bone (docs/conventions.md)")
 
 
 def json_vector(v: np.ndarray, digits: int) -> list[float] | None:
@@ -37,19 +49,47 @@ def json_vector(v: np.ndarray, digits: int) -> list[float] | None:
     return [round(float(x), digits) for x in v] if np.all(np.isfinite(v)) else None
 
 
+def full_joint_arrays(joints3d: np.ndarray, joints2d: np.ndarray, confidence: np.ndarray,
+                      skeleton: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, ...]:
+    """The full joint set's positions (K, 3), pixels (K, 2), confidences (K,) and orientations (K, 4)
+    (``SKELETON_NAMES`` order, NaN where unknown) from the 14 evaluation joints' ``joints3d``,
+    ``joints2d`` and ``confidence`` and the pose's ``skeleton`` (see :func:`body_message`)."""
+    n = len(SKELETON_NAMES)
+    positions, pixels, orientations = np.full((n, 3), np.nan), np.full((n, 2), np.nan), np.full((n, 4), np.nan)
+    full_confidence = np.zeros(n)
+    if skeleton is not None:
+        positions, pixels, orientations = (np.array(a, dtype=np.float64) for a in skeleton)
+        check_shape("skeleton positions", positions, (n, 3))
+        check_shape("skeleton pixels", pixels, (n, 2))
+        check_shape("skeleton orientations", orientations, (n, 4))
+        full_confidence = skeleton_confidence(confidence)
+    for e, name in enumerate(EVAL_JOINTS):  # the 14 as given, whatever the skeleton says
+        k = SKELETON_INDEX[name]
+        positions[k], pixels[k], full_confidence[k] = joints3d[e], joints2d[e], confidence[e]
+    return positions, pixels, full_confidence, orientations
+
+
 def body_message(body_id: int, state: str, reason: str, pose: np.ndarray | None, joints3d: np.ndarray,
                  joints2d: np.ndarray, confidence: np.ndarray, objective: Mapping[str, float],
-                 detection: dict | None = None, velocities: np.ndarray | None = None) -> dict:
-    """One body of a frame message.
+                 detection: dict | None = None, velocities: np.ndarray | None = None,
+                 skeleton: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> dict:
+    """One body of a frame message: every joint of ``SKELETON_NAMES`` (K = 28).
 
     pose: (36,) or None; joints3d: (14, 3) m and joints2d: (14, 2) px in ``EVAL_JOINTS``
     order (NaN rows where unknown); confidence: (14,) 0..1; objective: E and its terms;
     detection: ``{"layout", "keypoints": {name: [x, y, score]}}`` the body was fitted to;
-    velocities: (14, 3) m/s of the joints (None, or a joint's non-finite row: no ``velocity_m_s``).
+    velocities: (14, 3) m/s of the joints (None, or a joint's non-finite row: no ``velocity_m_s``);
+    skeleton: the full joint set of the pose, ``(positions (K, 3) m, pixels (K, 2) px, orientations
+    (K, 4) unit quaternions [x, y, z, w])`` in ``SKELETON_NAMES`` order, or None (no pose: the joints
+    beyond the 14 are null with confidence 0, and no joint has an orientation). The 14 evaluation
+    joints take their position, pixel and confidence from ``joints3d``, ``joints2d`` and
+    ``confidence``; the others take the skeleton's positions and the mean confidence of the
+    evaluation joints they follow (:func:`~swarmpose.body.joint_set.skeleton_confidence`).
     """
-    joints = {name: {"position_m": json_vector(p3, 6), "pixel": json_vector(p2, 2),
-                     "confidence": round(float(np.clip(c, 0.0, 1.0)), 3)}
-              for name, p3, p2, c in zip(EVAL_JOINTS, joints3d, joints2d, confidence)}
+    positions, pixels, full_confidence, orientations = full_joint_arrays(joints3d, joints2d, confidence, skeleton)
+    joints = {name: {"position_m": json_vector(p3, 6), "orientation_xyzw": json_vector(q, 6),
+                     "pixel": json_vector(p2, 2), "confidence": round(float(np.clip(c, 0.0, 1.0)), 3)}
+              for name, p3, q, p2, c in zip(SKELETON_NAMES, positions, orientations, pixels, full_confidence)}
     if velocities is not None:
         for name, v in zip(EVAL_JOINTS, velocities):
             if joints[name]["position_m"] is not None and np.all(np.isfinite(v)):
@@ -108,7 +148,10 @@ def info_message(camera: str, *, intrinsics=None, body=None, body_spec: str = ""
         body_info["personalisation"] = personalisation
     limits = {n: [float(lo), float(hi)] for n, (lo, hi) in zip(ANGLE_NAMES, ANGLE_LIMITS)}
     return {"schema": "swarmpose.info", "version": MESSAGE_VERSIONS["info"], "camera": camera, "keys": keys(camera),
-            "skeleton": {"joints": list(EVAL_JOINTS), "links": [list(link) for link in EVAL_LINKS], "units": "m",
+            "skeleton": {"joints": list(SKELETON_NAMES),
+                         "parents": [SKELETON_NAMES[p] if p >= 0 else None for p in SKELETON_PARENTS],
+                         "links": [list(link) for link in SKELETON_LINKS], "evaluation_joints": list(EVAL_JOINTS),
+                         "units": "m", "orientation": ORIENTATION,
                          "frame": WORLD_FRAME if world["coordinates"] == "world" else CAMERA_FRAME},
             "pose_vector": {"names": list(POSE_NAMES), "limits_rad": limits},
             "intrinsics": intr, "body": body_info, "source": source, "detector": detector, "mode": mode,

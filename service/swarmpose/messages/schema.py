@@ -18,14 +18,16 @@ from swarmpose.core.errors import ConfigError, ProtocolError
 if TYPE_CHECKING:  # jsonschema is imported by the first validation
     import jsonschema
 
-PROTOCOL_VERSION = 6
+PROTOCOL_VERSION = 7
 """The protocol as a whole; raised whenever one message's version is."""
-MESSAGE_VERSIONS = {"frame": 4, "status": 3, "info": 3}
+MESSAGE_VERSIONS = {"frame": 5, "status": 3, "info": 4}
 """Each message's own version: frame 2 added the optional per-body ``detection``; status 2 the
 optional ``tracker.people`` counts; status 3 and info 2 the optional ``personalisation``
 (``tracker.personalisation``, ``body.personalisation``: ``--personalize N``); frame 3 and info 3
 the world frame (frame ``coordinates`` and ``camera_to_world``, info ``world``: ``--floor``,
-``--coordinates``); frame 4 each joint's optional ``velocity_m_s``."""
+``--coordinates``); frame 4 each joint's optional ``velocity_m_s``; frame 5 and info 4 the full
+joint set (28 joints, each with ``orientation_xyzw``; info ``skeleton.parents``,
+``evaluation_joints`` and ``orientation``)."""
 SCHEMAS = ("frame", "status", "info")
 CAMERA_ID = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 
@@ -60,11 +62,16 @@ def _validator(name: str) -> jsonschema.Draft202012Validator:
 
 def validate(message: dict) -> dict:
     """``message`` if it matches the schema its ``schema`` field names, else a ProtocolError
-    saying which field is wrong."""
+    saying which field is wrong (a version other than :data:`MESSAGE_VERSIONS`' first of all)."""
     name = message.get("schema", "") if isinstance(message, dict) else ""
     kind = name.removeprefix("swarmpose.")
     if kind not in SCHEMAS:
         raise ProtocolError(f"not a swarmpose message: schema {name!r} (expected swarmpose.frame/status/info)")
+    version = message.get("version")
+    if version != MESSAGE_VERSIONS[kind]:  # said first: an older or newer peer, not a broken message
+        raise ProtocolError(f"{name} message invalid at version: {version!r}, while this swarmpose reads version "
+                            f"{MESSAGE_VERSIONS[kind]} (protocol {PROTOCOL_VERSION}); run the same swarmpose version "
+                            "on both sides (protocol/README.md, Versioning)")
     errors = sorted(_validator(kind).iter_errors(message), key=lambda e: list(e.absolute_path))
     if errors:
         first = errors[0]

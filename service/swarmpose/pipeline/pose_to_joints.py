@@ -17,7 +17,7 @@ from swarmpose.body.joint_fit import fit_pose_to_points
 from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
-from swarmpose.tracking.result import BodyResult
+from swarmpose.tracking.result import BodyResult, posed_skeleton
 
 
 def body_at_joints(body: BodyResult, skinned: SkinnedBody, intrinsics: Intrinsics, start: np.ndarray,
@@ -26,7 +26,8 @@ def body_at_joints(body: BodyResult, skinned: SkinnedBody, intrinsics: Intrinsic
     ``EVAL_JOINTS`` order: its pose fitted from ``start`` (36,) so that the body's own points move as
     ``joints`` move from ``body.joints3d`` (a tracker's published joints may differ from ``skinned``'s
     points by a locked height); the published joints are ``body``'s moved as those points moved, the 2D
-    joints their projections, ``unfiltered`` what the search found (``body.found``). Where the targets
+    joints their projections, the full joint set ``skeleton`` the fitted pose's, ``unfiltered`` what the
+    search found (``body.found``). Where the targets
     are not finite, the pose is ``start``."""
     found = skinned.posed_points(body.pose[None], EVAL_JOINTS)[0]
     targets = found + joints - body.joints3d
@@ -34,4 +35,4 @@ def body_at_joints(body: BodyResult, skinned: SkinnedBody, intrinsics: Intrinsic
             if np.all(np.isfinite(targets)) else np.asarray(start, dtype=np.float64))
     joints3d = body.joints3d + skinned.posed_points(pose[None], EVAL_JOINTS)[0] - found
     return replace(body, pose=pose, joints3d=joints3d, joints2d=intrinsics.project(joints3d),
-                   unfiltered=body.found)
+                   unfiltered=body.found, skeleton=posed_skeleton(skinned, pose, intrinsics))

@@ -26,6 +26,7 @@ import csv
 import logging
 from pathlib import Path
 
+from swarmpose.body.joint_set import EXTRA_JOINTS, SKELETON_NAMES
 from swarmpose.body.skeleton import EVAL_JOINTS, POSE_DIM
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.errors import OutputError
@@ -41,12 +42,18 @@ log = logging.getLogger(__name__)
 FRAME_COLUMNS: tuple[str, ...] = ("frame", "capture_ns", "received_ns", "publish_ns", "latency_ms", "coordinates")
 BODY_COLUMNS: tuple[str, ...] = ("body_id", "state", "reason")
 JOINT_FIELDS: tuple[str, ...] = ("x", "y", "z", "u", "v", "confidence")
+ORIENTATION_FIELDS: tuple[str, ...] = ("qx", "qy", "qz", "qw")
 CSV_COLUMNS: tuple[str, ...] = (FRAME_COLUMNS + BODY_COLUMNS
                                 + tuple(f"{j}_{f}" for j in EVAL_JOINTS for f in JOINT_FIELDS)
-                                + POSE_NAMES + ("objective",))
+                                + POSE_NAMES + ("objective",)
+                                + tuple(f"{j}_{f}" for j in EXTRA_JOINTS for f in JOINT_FIELDS)
+                                + tuple(f"{j}_{f}" for j in SKELETON_NAMES for f in ORIENTATION_FIELDS))
 """Columns of poses.csv: frame fields (``coordinates``: ``camera`` or ``world``, the frame of the
-row's metres and pose), body fields, per evaluation joint x y z (m), u v (px) and confidence,
-the 36 pose entries, and ``objective`` (E of the chosen pose)."""
+row's metres, pose and orientations), body fields, per evaluation joint x y z (m), u v (px) and
+confidence, the 36 pose entries, ``objective`` (E of the chosen pose); then (protocol 7, after the
+columns earlier files had, so that they keep their places) x y z u v confidence of the joints the
+full set adds (``EXTRA_JOINTS``) and qx qy qz qw, the orientation quaternion, of every joint of the
+full set (``SKELETON_NAMES``)."""
 
 
 class JsonlSink(FileSink):
@@ -90,6 +97,12 @@ def csv_rows(message: dict) -> list[list]:
             row.append(joint.get("confidence", ""))
         row += _cells(body.get("pose"), POSE_DIM)
         row.append((body.get("objective") or {}).get("E", ""))
+        for name in EXTRA_JOINTS:
+            joint = joints.get(name) or {}
+            row += _cells(joint.get("position_m"), 3) + _cells(joint.get("pixel"), 2)
+            row.append(joint.get("confidence", ""))
+        for name in SKELETON_NAMES:
+            row += _cells((joints.get(name) or {}).get("orientation_xyzw"), 4)
         rows.append(row)
     return rows
 

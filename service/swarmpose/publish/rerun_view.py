@@ -15,15 +15,17 @@ time, else a duration since the recording's start):
   message's ``camera_to_world`` in world coordinates), logged when it changes;
 * ``world/camera/image``: the pinhole of the intrinsics (static, logged again if they
   change) and the colour image (JPEG); under it per body id N ``bodies/N/joints`` (Points2D
-  at the joint pixels, keypoint ids in ``EVAL_JOINTS`` order), ``bodies/N/bones``
-  (LineStrips2D of ``EVAL_LINKS``) and, where the message has them, the detector's keypoints
+  at the joint pixels, keypoint ids in ``SKELETON_NAMES`` order: the full joint set),
+  ``bodies/N/bones`` (LineStrips2D of ``SKELETON_LINKS``) and, where the message has them, the detector's keypoints
   ``bodies/N/detection``;
 * ``world/camera/depth``: the depth as a point cloud in the camera frame (m), every
   :data:`DEPTH_STEP`-th pixel in both directions where the depth is valid, coloured from the
   colour image;
 * ``world/bodies/N/joints`` (Points3D of the joints' ``position_m``, exactly the message's
-  values, keypoint ids as above, the id's colour), ``world/bodies/N/bones`` (LineStrips3D)
-  and ``world/bodies/N/label`` (one point above the head labelled ``N state confidence``);
+  values, keypoint ids as above, the id's colour), ``world/bodies/N/bones`` (LineStrips3D),
+  ``world/bodies/N/axes`` (Arrows3D: each joint's frame from its ``orientation_xyzw``, x red, y green,
+  z blue, :data:`AXIS_LENGTH_M` long) and ``world/bodies/N/label`` (one point above the head
+  labelled ``N state confidence``);
 * ``stats/confidence/N`` (Scalars: the body's mean joint confidence, 0..1),
   ``stats/latency_ms`` (Scalars), ``log`` (TextLog: a body's state when it changes, a frame's
   reason, the worker's state when it changes).
@@ -39,7 +41,8 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmpose.body.skeleton import EVAL_JOINTS, EVAL_LINKS
+from swarmpose.body.joint_set import SKELETON_LINKS, SKELETON_NAMES
+from swarmpose.body.kinematics import quaternion_to_matrix
 from swarmpose.core.camera import Intrinsics
 from swarmpose.detect.floor import sample_grid
 from swarmpose.publish.overlay import id_color
@@ -51,12 +54,17 @@ DEPTH_STEP = 3
 JPEG_QUALITY = 85
 EPOCH_NS = 10**18
 """capture_ns at or above this (2001-09-09) is a UNIX time; below, a time since the recording's start."""
-JOINT_INDEX = {name: k for k, name in enumerate(EVAL_JOINTS)}
-LINK_IDS = np.array([(JOINT_INDEX[a], JOINT_INDEX[b]) for a, b in EVAL_LINKS])
+AXIS_LENGTH_M = 0.08
+"""Length of each joint's axis arrows, m."""
+AXIS_COLORS = np.array([[230, 40, 40], [40, 200, 40], [40, 90, 230]], dtype=np.uint8)
+"""x red, y green, z blue."""
+JOINT_INDEX = {name: k for k, name in enumerate(SKELETON_NAMES)}
+LINK_IDS = np.array([(JOINT_INDEX[a], JOINT_INDEX[b]) for a, b in SKELETON_LINKS])
 """(L, 2) keypoint ids of the skeleton's links."""
 ENTITIES = ("world", "world/camera", "world/camera/image", "world/camera/depth", "world/bodies/{id}/joints",
-            "world/bodies/{id}/bones", "world/bodies/{id}/label", "world/camera/image/bodies/{id}/joints",
-            "world/camera/image/bodies/{id}/bones", "stats/confidence/{id}", "stats/latency_ms", "log")
+            "world/bodies/{id}/bones", "world/bodies/{id}/axes", "world/bodies/{id}/label",
+            "world/camera/image/bodies/{id}/joints", "world/camera/image/bodies/{id}/bones", "stats/confidence/{id}",
+            "stats/latency_ms", "log")
 """The entity paths the sink logs ({id}: a body id)."""
 
 
@@ -75,11 +83,11 @@ def depth_points(frame: Frame, step: int = DEPTH_STEP) -> tuple[np.ndarray, np.n
 
 def joint_arrays(body: dict, field: str) -> tuple[np.ndarray, np.ndarray]:
     """The known joints of one body entry: values (K, 3) or (K, 2) float64 of ``field``
-    (``position_m`` or ``pixel``) and their keypoint ids (K,) (indices into ``EVAL_JOINTS``);
-    joints whose value is null are left out."""
+    (``position_m`` or ``pixel``) and their keypoint ids (K,) (indices into ``SKELETON_NAMES``);
+    joints whose value is null (or, in a file of an earlier protocol, absent) are left out."""
     joints = body.get("joints") or {}
     ids, values = [], []
-    for k, name in enumerate(EVAL_JOINTS):
+    for k, name in enumerate(SKELETON_NAMES):
         value = (joints.get(name) or {}).get(field)
         if value is not None:
             ids.append(k)
@@ -88,8 +96,24 @@ def joint_arrays(body: dict, field: str) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(values, dtype=np.float64).reshape(-1, width), np.asarray(ids, dtype=np.int64)
 
 
+def axis_arrows(body: dict, length: float = AXIS_LENGTH_M) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each joint's frame as three arrows: origins (3M, 3) m (the joint's ``position_m``), vectors
+    (3M, 3) m (``length`` along its x, y and z axes, from ``orientation_xyzw``) and colours (3M, 3)
+    (:data:`AXIS_COLORS`), for the M joints with both values, in ``SKELETON_NAMES`` order."""
+    joints = body.get("joints") or {}
+    known = [(j["position_m"], j["orientation_xyzw"]) for j in (joints.get(n) or {} for n in SKELETON_NAMES)
+             if j.get("position_m") is not None and j.get("orientation_xyzw") is not None]
+    if not known:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3), np.uint8)
+    positions = np.asarray([p for p, _ in known], dtype=np.float64)
+    xyzw = np.asarray([q for _, q in known], dtype=np.float64)
+    axes = quaternion_to_matrix(xyzw[:, [3, 0, 1, 2]])  # (M, 3, 3), columns the joint's axes
+    vectors = length * np.swapaxes(axes, 1, 2).reshape(-1, 3)
+    return np.repeat(positions, 3, axis=0), vectors, np.tile(AXIS_COLORS, (len(known), 1))
+
+
 def bone_strips(values: np.ndarray, ids: np.ndarray) -> list[np.ndarray]:
-    """Line strips (each (2, D)) of the links of :data:`EVAL_LINKS` whose two joints are in ``ids``."""
+    """Line strips (each (2, D)) of the links of :data:`SKELETON_LINKS` whose two joints are in ``ids``."""
     where = {int(k): i for i, k in enumerate(ids)}
     return [values[[where[a], where[b]]] for a, b in LINK_IDS if a in where and b in where]
 
@@ -129,7 +153,7 @@ class RerunSink:
         self._closed = False
         annotation = rr.ClassDescription(info=rr.AnnotationInfo(id=0, label="joint"),
                                          keypoint_annotations=[rr.AnnotationInfo(id=k, label=name)
-                                                               for k, name in enumerate(EVAL_JOINTS)])
+                                                               for k, name in enumerate(SKELETON_NAMES)])
         self.rec.log("world", rr.AnnotationContext([annotation]), static=True)
 
     @property
@@ -188,6 +212,8 @@ class RerunSink:
         rec.log(f"{base}/joints", rr.Points3D(positions, keypoint_ids=ids, class_ids=0, colors=color,
                                               radii=0.025, show_labels=False))
         rec.log(f"{base}/bones", rr.LineStrips3D(bone_strips(positions, ids), colors=color, radii=0.012))
+        origins, vectors, axis_colors = axis_arrows(body)
+        rec.log(f"{base}/axes", rr.Arrows3D(origins=origins, vectors=vectors, colors=axis_colors, radii=0.004))
         up = np.array([0.0, 1.0 if self._coordinates == "world" else -1.0, 0.0])
         top = positions[np.argmax(positions @ up)] if len(positions) else np.zeros(3)
         rec.log(f"{base}/label", rr.Points3D(top[None] + 0.15 * up, colors=color, radii=0.001,

@@ -64,7 +64,7 @@ from swarmpose.tracking.objective import JointTargets, Objective, search_split
 from swarmpose.tracking.one_euro import PoseFilter
 from swarmpose.tracking.pose_polish import polish_solution
 from swarmpose.tracking.pso import PsoConfig, PsoResult, minimise
-from swarmpose.tracking.result import BodyResult, lost_body
+from swarmpose.tracking.result import BodyResult, lost_body, posed_skeleton
 
 REPLACED_TURN_DEG = 90.0
 """A frame's solution turned this far (root rotation, degrees) from the last frame's is a
@@ -277,7 +277,8 @@ class BodyTracker:
         timings["total"] = 1000 * (time.perf_counter() - t0)
         if state == "tracking":
             self.costs.record(timings["pso"] + timings["polish"], scored, timings["total"])
-        out = BodyResult(self.body_id, out_state, reason, best, joints3d, joints2d, conf, parts, timings, joints)
+        out = BodyResult(self.body_id, out_state, reason, best, joints3d, joints2d, conf, parts, timings, joints,
+                         skeleton=posed_skeleton(self.body, best, self.intrinsics))
         if self.filter is None or out_state == "lost":
             return out
         return self._filtered(out, frame.timestamp_ns * 1e-9)
@@ -345,7 +346,7 @@ class BodyTracker:
         pose = self.filter(result.pose, time_s)
         joints3d = self.body.posed_points(pose[None], EVAL_JOINTS)[0]
         return replace(result, pose=pose, joints3d=joints3d, joints2d=self.intrinsics.project(joints3d),
-                       unfiltered=result)
+                       unfiltered=result, skeleton=posed_skeleton(self.body, pose, self.intrinsics))
 
     def _lost(self, reason: str, t0: float, joints: Joints2D | None = None) -> BodyResult:
         self.reset()

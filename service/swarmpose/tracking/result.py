@@ -12,10 +12,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from swarmpose.body.joint_set import SKELETON_NAMES, posed_joints
+from swarmpose.body.kinematics import matrix_to_quaternion
 from swarmpose.body.skeleton import EVAL_JOINTS
+from swarmpose.body.skinned import SkinnedBody
+from swarmpose.core.camera import Intrinsics
 from swarmpose.core.world import WorldState, transform_points, transform_poses
 from swarmpose.detect.joints import Joints2D
-from swarmpose.messages.build import body_message, frame_message
+from swarmpose.messages.build import body_message, frame_message, full_joint_arrays
 
 STATES = ("init", "tracking", "lost")
 
@@ -23,11 +27,35 @@ STATES = ("init", "tracking", "lost")
 @dataclass(frozen=True)
 class Joint:
     """One joint of one body: ``position_m`` (3,) camera frame m and ``pixel`` (2,) px, each
-    None where unknown; ``confidence`` 0..1."""
+    None where unknown; ``confidence`` 0..1; ``orientation_xyzw`` (4,) the unit quaternion of the
+    joint's frame in the camera frame (:mod:`swarmpose.body.joint_set`), None without a pose."""
 
     position_m: np.ndarray | None
     pixel: np.ndarray | None
     confidence: float
+    orientation_xyzw: np.ndarray | None = None
+
+
+def xyzw(frames: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) as unit quaternions (..., 4) ``[x, y, z, w]`` with w >= 0."""
+    return matrix_to_quaternion(frames)[..., [1, 2, 3, 0]]
+
+
+@dataclass(frozen=True)
+class PosedSkeleton:
+    """The full joint set (:data:`~swarmpose.body.joint_set.SKELETON_NAMES`, K = 28) of a posed
+    body: ``positions`` (K, 3) m and ``frames`` (K, 3, 3) (each joint's axes as columns) in the
+    camera frame, ``pixels`` (K, 2) px (NaN behind the camera)."""
+
+    positions: np.ndarray
+    frames: np.ndarray
+    pixels: np.ndarray
+
+
+def posed_skeleton(body: SkinnedBody, pose: np.ndarray, intrinsics: Intrinsics) -> PosedSkeleton:
+    """The full joint set of ``body`` at ``pose`` (36,), camera frame, projected with ``intrinsics``."""
+    positions, frames = posed_joints(body, pose)
+    return PosedSkeleton(positions[0], frames[0], intrinsics.project(positions[0]))
 
 
 @dataclass(frozen=True)
@@ -40,7 +68,8 @@ class BodyResult:
     and its terms of the chosen pose; timings_ms: where this body's time went; detection:
     the 2D joints it was fitted to (None: none); unfiltered: with ``--smoothing``, the result
     as the search found it, before the published pose was filtered (None: not filtered);
-    velocities: (14, 3) m/s of the joints, camera frame (None: not estimated).
+    velocities: (14, 3) m/s of the joints, camera frame (None: not estimated); skeleton: the
+    full joint set of the pose with orientations (None: no pose, or not computed).
     """
 
     id: int
@@ -55,6 +84,7 @@ class BodyResult:
     detection: Joints2D | None = None
     unfiltered: BodyResult | None = None
     velocities: np.ndarray | None = None
+    skeleton: PosedSkeleton | None = None
 
     @property
     def found(self) -> BodyResult:
@@ -64,12 +94,25 @@ class BodyResult:
 
     @property
     def joints(self) -> dict[str, Joint]:
-        """The evaluation joints by name (``left_wrist``, ...)."""
-        out = {}
-        for name, p3, p2, c in zip(EVAL_JOINTS, self.joints3d, self.joints2d, self.confidence):
-            out[name] = Joint(p3.copy() if np.all(np.isfinite(p3)) else None,
-                              p2.copy() if np.all(np.isfinite(p2)) else None, float(c))
-        return out
+        """The full joint set by name (``pelvis``, ``left_wrist``, ...; ``SKELETON_NAMES`` order), in
+        the camera frame: each joint as the frame message has it, unrounded."""
+        arrays = full_joint_arrays(self.joints3d, self.joints2d, self.confidence, self.skeleton_values())
+
+        def known(v: np.ndarray) -> np.ndarray | None:
+            return v.copy() if np.all(np.isfinite(v)) else None
+        return {name: Joint(known(p3), known(p2), float(c), known(q))
+                for name, p3, p2, c, q in zip(SKELETON_NAMES, *arrays)}
+
+    def skeleton_values(self, camera_to_world: np.ndarray | None = None) -> tuple[np.ndarray, ...] | None:
+        """The full set's positions (K, 3) m, pixels (K, 2) px and orientations (K, 4) xyzw, in the
+        camera frame or, with ``camera_to_world`` (4, 4), the world's; None without a skeleton."""
+        if self.skeleton is None:
+            return None
+        positions, frames = self.skeleton.positions, self.skeleton.frames
+        if camera_to_world is not None:
+            positions = transform_points(camera_to_world, positions)
+            frames = np.asarray(camera_to_world)[:3, :3] @ frames
+        return positions, self.skeleton.pixels, xyzw(frames)
 
     def joints_box(self) -> np.ndarray | None:
         """(4,) [u0, v0, u1, v1] px around the finite 2D joints (where to detect next), or None."""
@@ -92,7 +135,8 @@ class BodyResult:
             pose = None if pose is None else transform_poses(camera_to_world, pose)
             velocities = None if velocities is None else velocities @ np.asarray(camera_to_world)[:3, :3].T
         return body_message(self.id, self.state, self.reason, pose, joints3d, self.joints2d,
-                            self.confidence, self.objective, detection, velocities)
+                            self.confidence, self.objective, detection, velocities,
+                            self.skeleton_values(camera_to_world))
 
 
 def lost_body(reason: str, body_id: int = 0, timings_ms: Mapping[str, float] | None = None,
