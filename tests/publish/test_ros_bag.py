@@ -150,6 +150,11 @@ def test_world_coordinates_hang_the_people_under_world(wave_sequence, tmp_path):
         np.testing.assert_allclose(Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix(), matrix[:3, :3], atol=1e-6)
 
 
+def test_no_ros_bag_leaves_it_out(wave_sequence, tmp_path):
+    assert main(["track", str(wave_sequence), "--out", str(tmp_path), "--frames", "1", "--no-ros-bag", *FAST]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["poses.bvh", "poses.csv", "poses.jsonl", "run.json"]
+
+
 def example_message(capture_ns: int, body_ids: tuple[int, ...]) -> dict:
     """protocol/examples/frame.json at ``capture_ns`` with its body as each of ``body_ids``,
     without its camera transform."""
