@@ -32,10 +32,11 @@ from pathlib import Path
 import numpy as np
 
 from swarmpose.body.joint_set import SKELETON_NAMES, SKELETON_PARENTS
+from swarmpose.body.kinematics import matrix_to_quaternion
 from swarmpose.core.errors import OutputError
 from swarmpose.publish.file_sink import write_error
 from swarmpose.publish.overlay import id_color
-from swarmpose.publish.ros_skeleton import body_joints, link_points, parent_relative
+from swarmpose.publish.ros_skeleton import body_joints, link_points, parent_relative, to_xyzw
 from swarmpose.sources.base import Frame
 
 log = logging.getLogger(__name__)
@@ -115,7 +116,6 @@ class RosBagSink:
         self.frames = 0
         self._closed = False
         self._with_ids: set[int] = set()  # the bodies the last marker array drew
-        self._camera_place: tuple[bytes, np.ndarray] | None = None  # the last camera_to_world's quaternion
         self._store = get_typestore(Stores.ROS2_JAZZY)
         self._types = self._store.types
         try:
@@ -150,8 +150,6 @@ class RosBagSink:
         matrix = message.get("camera_to_world")
         if matrix is None:
             return []
-        from scipy.spatial.transform import Rotation
-
         m = np.asarray(matrix, dtype=np.float64)
         camera = str(message.get("camera") or "camera")
         if message.get("coordinates") != "world":  # the world under the camera: the inverse
@@ -159,9 +157,7 @@ class RosBagSink:
             parent, child = camera, "world"
         else:
             parent, child = "world", camera
-        if self._camera_place is None or self._camera_place[0] != m.tobytes():  # it rarely changes
-            self._camera_place = (m.tobytes(), Rotation.from_matrix(m[:3, :3]).as_quat())
-        q = self._camera_place[1]
+        q = to_xyzw(matrix_to_quaternion(m[:3, :3]))
         return [self._transform(self._header(stamp, parent), child, m[:3, 3], q)]
 
     def _markers(self, header, body_id: int, positions: np.ndarray | None) -> list:

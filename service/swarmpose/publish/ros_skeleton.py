@@ -17,27 +17,17 @@ from __future__ import annotations
 import numpy as np
 
 from swarmpose.body.joint_set import SKELETON_LINKS, SKELETON_NAMES, SKELETON_PARENTS
+from swarmpose.body.kinematics import quaternion_multiply, quaternion_to_matrix
 
 
-def quaternion_matrix(q: np.ndarray) -> np.ndarray:
-    """The rotation matrices (..., 3, 3) of unit quaternions ``q`` (..., 4) ``[x, y, z, w]``."""
-    x, y, z, w = np.moveaxis(np.asarray(q, dtype=np.float64), -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=-1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=-1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=-1),
-    ], axis=-2)
+def to_wxyz(q: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) ``[x, y, z, w]`` (ROS) as ``[w, x, y, z]`` (:mod:`swarmpose.body.kinematics`)."""
+    return np.roll(np.asarray(q, dtype=np.float64), 1, axis=-1)
 
 
-def quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The Hamilton products ``a b`` (..., 4) of quaternions ``a``, ``b`` (..., 4) ``[x, y, z, w]``
-    (the rotation ``b`` first, then ``a``)."""
-    ax, ay, az, aw = np.moveaxis(np.asarray(a, dtype=np.float64), -1, 0)
-    bx, by, bz, bw = np.moveaxis(np.asarray(b, dtype=np.float64), -1, 0)
-    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw,
-                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
+def to_xyzw(q: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) ``[w, x, y, z]`` as ``[x, y, z, w]``."""
+    return np.roll(np.asarray(q, dtype=np.float64), -1, axis=-1)
 
 
 def body_joints(body: dict) -> tuple[np.ndarray, np.ndarray] | None:
@@ -68,10 +58,10 @@ def parent_relative(positions: np.ndarray, orientations: np.ndarray) -> tuple[np
     has_parent = parents >= 0
     parent_q = np.where(has_parent[:, None], orientations[np.maximum(parents, 0)], [0.0, 0.0, 0.0, 1.0])
     parent_x = np.where(has_parent[:, None], positions[np.maximum(parents, 0)], 0.0)
-    rotation_t = np.swapaxes(quaternion_matrix(parent_q), -1, -2)
+    rotation_t = np.swapaxes(quaternion_to_matrix(to_wxyz(parent_q)), -1, -2)
     translations = np.einsum("kij,kj->ki", rotation_t, positions - parent_x)
     inverse = parent_q * np.array([-1.0, -1.0, -1.0, 1.0])
-    rotations = quaternion_multiply(inverse, orientations)
+    rotations = to_xyzw(quaternion_multiply(to_wxyz(inverse), to_wxyz(orientations)))
     rotations *= np.where(rotations[:, 3:] < 0, -1.0, 1.0)
     return translations, rotations
 
@@ -84,4 +74,4 @@ def link_points(positions: np.ndarray) -> np.ndarray:
     return np.asarray(positions, dtype=np.float64)[pairs]
 
 
-__all__ = ["body_joints", "link_points", "parent_relative", "quaternion_matrix", "quaternion_multiply"]
+__all__ = ["body_joints", "link_points", "parent_relative", "to_wxyz", "to_xyzw"]
