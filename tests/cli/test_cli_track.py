@@ -52,7 +52,8 @@ def test_track_writes_one_line_per_frame(sequence, tmp_path, capsys):
     body = lines[0]["bodies"][0]
     assert set(body["joints"]) >= {"head", "left_wrist", "right_ankle"} and len(body["pose"]) == 36
     assert body["detection"]["layout"] == "coco17"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["poses.bvh", "poses.csv", "poses.jsonl", "run.json"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["poses.bvh", "poses.csv", "poses.jsonl", "poses_ros2",
+                                                             "run.json"]
     assert "tracked 5 frames" in capsys.readouterr().out
 
 

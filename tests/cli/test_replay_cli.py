@@ -44,7 +44,8 @@ def test_replay_writes_every_output_and_scores_it(wave_sequence, tmp_path, capsy
     assert len(read_bvh(out / "poses.bvh")) == 6
     with av.open(str(out / "overlay.mp4")) as video:
         assert sum(1 for _ in video.decode(video=0)) == 6
-    assert set(result["outputs"]) == {str(out / n) for n in ("poses.jsonl", "poses.csv", "poses.bvh", "overlay.mp4")}
+    assert set(result["outputs"]) == {str(out / n) for n in ("poses.jsonl", "poses.csv", "poses.bvh", "overlay.mp4",
+                                                             "poses_ros2/poses_ros2.mcap", "poses_ros2/metadata.yaml")}
 
 
 def test_replay_of_a_damaged_recording_reports_and_goes_on(wave_sequence, tmp_path, capsys):

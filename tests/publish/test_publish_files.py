@@ -30,6 +30,7 @@ from swarmpose.motion.bvh import read_bvh
 from swarmpose.publish.bvh_file import UPRIGHT, BvhSink, PerIdBvhSink
 from swarmpose.publish.files import CsvSink, JsonlSink, open_recording
 from swarmpose.publish.overlay import OverlaySink
+from swarmpose.publish.ros_bag import RosBagSink
 from swarmpose.sim.synth import SynthConfig, place_camera
 
 TO_BVH = np.array([100.0, -100.0, -100.0])  # camera frame m -> BVH world cm (Y up)
@@ -435,7 +436,7 @@ def expected_rows(body, poses: np.ndarray, body_id: int) -> tuple[int, np.ndarra
 def test_several_people_get_one_bvh_per_id(tmp_path, builtin_body):
     poses = camera_poses(builtin_body, "walk", 12)
     out = tmp_path / "replay"
-    sinks = open_recording(out, builtin_body, fps=20.0, overlay=False)
+    sinks = open_recording(out, builtin_body, fps=20.0, overlay=False, ros_bag=False)
     assert [type(s) for s in sinks] == [JsonlSink, CsvSink, PerIdBvhSink]
     bvh = sinks[2]
     names = {0: "poses.bvh", 1: "poses_id1.bvh", 4: "poses_id4.bvh"}
@@ -499,14 +500,14 @@ def test_bad_body_ids_are_refused(tmp_path, builtin_body):
 def test_open_recording_creates_the_files(tmp_path, builtin_body):
     out = tmp_path / "run" / "replay"
     sinks = open_recording(out, builtin_body, fps=15.0)
-    assert [type(s) for s in sinks] == [JsonlSink, CsvSink, PerIdBvhSink, OverlaySink]
-    assert [s.path.name for s in sinks] == ["poses.jsonl", "poses.csv", "poses.bvh", "overlay.mp4"]
+    assert [type(s) for s in sinks] == [JsonlSink, CsvSink, PerIdBvhSink, OverlaySink, RosBagSink]
+    assert [s.path.name for s in sinks] == ["poses.jsonl", "poses.csv", "poses.bvh", "overlay.mp4", "poses_ros2"]
     for sink in sinks:
         sink.frame(sample_messages()[0], None)
         sink.close()
-    assert {p.name for p in out.iterdir()} == {"poses.jsonl", "poses.csv", "poses.bvh"}  # no frame: no video
+    assert {p.name for p in out.iterdir()} == {"poses.jsonl", "poses.csv", "poses.bvh", "poses_ros2"}  # no video
     assert read_bvh(out / "poses.bvh").frame_time == pytest.approx(1 / 15.0)
-    assert len(open_recording(tmp_path / "other", builtin_body, overlay=False)) == 3
+    assert len(open_recording(tmp_path / "other", builtin_body, overlay=False, ros_bag=False)) == 3
 
 
 def test_unwritable_paths_raise_output_error(tmp_path, builtin_body):

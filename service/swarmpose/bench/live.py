@@ -225,7 +225,8 @@ def serve_startup_s(config: ServiceConfig, cache: Path, timeout_s: float = START
         record = Path(tmp) / "record"
         t = config.tracker
         argv = [sys.executable, "-m", "swarmpose", "serve", config.source, "--zenoh-mode", "off", "--record",
-                str(record), "--no-overlay", "--body", config.body, "--detector", config.detector, "--quiet",
+                str(record), "--no-overlay", "--no-ros-bag", "--body", config.body, "--detector", config.detector,
+                "--quiet",
                 "--particles", str(t.particles), "--generations", str(t.generations), "--max-people",
                 str(t.max_people), "--frame-budget-ms", str(config.frame_budget_ms), "--rate", str(config.rate)]
         argv += ["--shape", config.shape] if config.shape else []

@@ -18,7 +18,8 @@ from swarmpose.pipeline.config import ServiceConfig
 from swarmpose.sources.utdmhad_sync import DEPTH_LAG_FRAMES
 from swarmpose.tracking.config import TrackerConfig
 
-LIVE_SETTINGS = (*(s for s in TRACK_SETTINGS if s not in ("frames", "overlay", "view", "view_url", "view_port", "rrd")),
+LIVE_SETTINGS = (*(s for s in TRACK_SETTINGS if s not in ("frames", "overlay", "ros_bag", "ros_depth", "view",
+                                                          "view_url", "view_port", "rrd")),
                  "rate", "frame_budget_ms")
 """The settings ``bench live`` takes: a served run's, without the outputs it does not write."""
 OVERLAY_SETTINGS = ("particles", "generations", "max_people")

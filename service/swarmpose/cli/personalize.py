@@ -68,7 +68,7 @@ def add_personalize_command(sub: argparse._SubParsersAction, common: argparse.Ar
                        help="estimate the person's body shape from a recording and write it as GLB")
     add_source_argument(p)
     ignored = ("frames", "overlay", "personalize", "max_people", "retire_frames",  # one person, fitted here
-               "coordinates", "floor")
+               "coordinates", "floor", "ros_bag", "ros_depth")
     add_flags(p, ServiceConfig, tuple(s for s in TRACK_SETTINGS if s not in ignored))
     p.add_argument("--frames", type=positive_int, default=60, help="frames to read from the start of the source")
     advanced(p.add_argument("--keyframes", type=positive_int, default=FitSettings.keyframes,

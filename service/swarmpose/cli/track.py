@@ -2,7 +2,8 @@
 
 Both run the sequential pipeline (:mod:`swarmpose.pipeline.run`): one thread, every frame.
 ``--out DIR`` gets the same files as ``replay`` (``poses.jsonl`` of frame messages,
-``poses.csv``, ``poses.bvh``, ``overlay.mp4`` unless ``--no-overlay``). Exit status 1 when
+``poses.csv``, ``poses.bvh``, ``overlay.mp4`` unless ``--no-overlay``, the ROS 2 bag ``poses_ros2/``
+unless ``--no-ros-bag``). Exit status 1 when
 an output file could not be written or the source broke off (a truncated recording, a camera
 that vanished: a warning names it); what was tracked until then is written and reported.
 SIGINT or SIGTERM ends the run after the frame in progress, every file closed (exit status 130).
@@ -30,7 +31,7 @@ if TYPE_CHECKING:  # what runs the commands is imported by them (the parser need
     from swarmpose.pipeline.service import Parts
 
 TRACK_SETTINGS = ("source", "detector", "models", "body", "shape", *leaves(TrackerConfig), "camera_id", "frames",
-                  "overlay", "coordinates", "floor", "view", "view_url", "view_port", "rrd")
+                  "overlay", "ros_bag", "ros_depth", "coordinates", "floor", "view", "view_url", "view_port", "rrd")
 """The settings ``track`` and ``eval`` take (``serve`` and ``replay`` take these and the service's)."""
 
 

@@ -62,6 +62,11 @@ class ServiceConfig:
     frames: int = setting(0, "stop after this many frames (0 = all)", minimum=0, aliases=("max_frames",),
                           everyday=True)
     overlay: bool = setting(True, "write overlay.mp4 (the skeleton over the colour video) with the other files")
+    ros_bag: bool = setting(True, "write poses_ros2/, a ROS 2 bag in MCAP (every joint on /tf, skeleton markers), "
+                                  "with the other files")
+    """docs/outputs.md, the ROS 2 bag: its topics, frame ids and how to play it."""
+    ros_depth: bool = setting(False, "the ROS 2 bag also holds each frame's depth (sensor_msgs/Image 32FC1, m) and "
+                                     "CameraInfo")
     coordinates: str = setting("camera", "joints and poses in camera (OpenCV axes) or world coordinates (y up, "
                                          "on the floor)", choices=("camera", "world"), everyday=True)
     """world: floor-aligned, y up, the floor at y = 0, the origin under the first tracked person;

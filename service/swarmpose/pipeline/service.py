@@ -133,7 +133,8 @@ def open_parts(config: ServiceConfig, stack: ExitStack, *, out: str = "", score:
     if out:
         # the bodies that --personalize or the automatic height change (those the pipeline reports on)
         body_of = parts.pipeline.body_of if parts.pipeline.personalise_frames else None
-        recording = open_recording(Path(out), tracking_body, fps=parts.fps, overlay=config.overlay, body_of=body_of)
+        recording = open_recording(Path(out), tracking_body, fps=parts.fps, overlay=config.overlay, body_of=body_of,
+                                   ros_bag=config.ros_bag, ros_depth=config.ros_depth)
         for sink in recording:  # the run closes them; this covers a failure before it starts
             stack.callback(sink.close)
         parts.sinks.extend(recording)

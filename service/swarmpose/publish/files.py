@@ -13,7 +13,9 @@ a run that dies leaves files holding every frame written so far:
   Y up, standing on the floor in the world frame wherever the message knows it
   (``camera_to_world``); :class:`PerIdBvhSink` keeps one per id: ``poses.bvh`` for id 0,
   ``poses_id<N>.bvh`` for id N, created when N first appears;
-* :class:`~swarmpose.publish.overlay.OverlaySink` — every body's skeleton drawn over the video.
+* :class:`~swarmpose.publish.overlay.OverlaySink` — every body's skeleton drawn over the video;
+* :class:`~swarmpose.publish.ros_bag.RosBagSink` — ``poses_ros2/``, a ROS 2 bag (MCAP) of every
+  joint as TF and the skeletons as markers.
 
 :func:`open_recording` opens all of them in one folder. The BVH sinks live in
 :mod:`swarmpose.publish.bvh_file` (imported here as before). A file that cannot be created or
@@ -34,6 +36,7 @@ from swarmpose.messages import POSE_NAMES, encode
 from swarmpose.publish.bvh_file import BodyOf, PerIdBvhSink
 from swarmpose.publish.file_sink import FileSink, write_error
 from swarmpose.publish.overlay import OverlaySink
+from swarmpose.publish.ros_bag import BAG_NAME, RosBagSink, is_earlier_bag, remove_earlier_bag, rosbags_missing
 from swarmpose.publish.sink import Sink
 from swarmpose.sources.base import Frame
 
@@ -133,12 +136,15 @@ class CsvSink(FileSink):
 
 
 def open_recording(out_dir: str | Path, body: SkinnedBody, fps: float = 30.0, overlay: bool = True,
-                   body_of: BodyOf | None = None) -> list[Sink]:
+                   body_of: BodyOf | None = None, ros_bag: bool = True, ros_depth: bool = False) -> list[Sink]:
     """The replay sinks of folder ``out_dir`` (created if needed): poses.jsonl, poses.csv,
     the BVH files (:class:`PerIdBvhSink`: poses.bvh for id 0, poses_id<N>.bvh for id N,
-    animating ``body`` at ``fps``, or with ``body_of`` each id's current body) and, with
-    ``overlay``, overlay.mp4. An earlier run's ``poses_id<N>.bvh`` there are removed (the folder
-    then holds one run's files)."""
+    animating ``body`` at ``fps``, or with ``body_of`` each id's current body), with
+    ``overlay`` overlay.mp4 and with ``ros_bag`` the ROS 2 bag ``poses_ros2/`` (with
+    ``ros_depth`` holding the depth too; left out, with one warning, where the ``rosbags`` package
+    is missing). An earlier run's ``poses_id<N>.bvh`` and ``poses_ros2/`` there are removed (the
+    folder then holds one run's files); something else named ``poses_ros2`` in the way of the bag
+    is an OutputError."""
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -152,6 +158,9 @@ def open_recording(out_dir: str | Path, body: SkinnedBody, fps: float = 30.0, ov
         except OSError as exc:
             raise OutputError(f"cannot remove {path}, an earlier run's output: {exc.strerror or exc}; choose an "
                               "empty output folder") from exc
+    bag = out / BAG_NAME
+    if (ros_bag or is_earlier_bag(bag)) and remove_earlier_bag(bag):  # its poses are another run's
+        stale.append(bag)
     if stale:
         log.info("%s: removed %s of an earlier run (its other files are written anew)", out,
                  ", ".join(p.name for p in stale))
@@ -159,6 +168,12 @@ def open_recording(out_dir: str | Path, body: SkinnedBody, fps: float = 30.0, ov
               lambda: PerIdBvhSink(out, body, fps, body_of)]
     if overlay:
         makers.append(lambda: OverlaySink(out / "overlay.mp4", fps))
+    missing = rosbags_missing() if ros_bag else ""
+    if missing:
+        log.warning("%s not written: %s; install it with `pip install rosbags` (a dependency of swarmpose), or "
+                    "leave the bag out with --no-ros-bag", bag, missing)
+    elif ros_bag:
+        makers.append(lambda: RosBagSink(bag, depth=ros_depth))
     sinks: list[Sink] = []
     try:
         for make in makers:
