@@ -26,8 +26,6 @@ from swarmpose.sim.depth_noise import KinectNoise
 KINECT = Intrinsics.kinect_v1()
 FIVE = ASSETS / "rgbd" / "kinect_five_people"
 SKELTRACK = ASSETS / "rgbd" / "skeltrack_frames"
-SCALES = (1, 2)
-"""Segmentation at full resolution and on every other pixel (what the tracking pipeline runs)."""
 TWO_PEOPLE_FRAMES = {"1399145206", "82823944"}
 """The Skeltrack frames that hold two people (looked at): the others hold one."""
 
@@ -143,10 +141,9 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("scale", SCALES)
-def test_synthetic_views_give_one_person_with_the_true_silhouette_and_height(walk_frames, scale):
+def test_synthetic_views_give_one_person_with_the_true_silhouette_and_height(walk_frames):
     for frame in walk_frames:
-        seg = segment_people(frame.depth, frame.intrinsics, scale=scale)
+        seg = segment_people(frame.depth, frame.intrinsics)
         check_invariants(seg, frame.depth.shape)
         assert len(seg.people) == 1, f"{frame.name}: {len(seg.people)} people, rejected {seg.rejected}"
         person = seg.people[0]
@@ -165,10 +162,9 @@ def test_synthetic_views_give_one_person_with_the_true_silhouette_and_height(wal
         assert np.linalg.norm(person.centroid_m - truth_centre) < 0.1, frame.name
 
 
-@pytest.mark.parametrize("scale", SCALES)
-def test_wall_seen_between_arm_and_body_is_not_a_person(walk_frames, scale):
+def test_wall_seen_between_arm_and_body_is_not_a_person(walk_frames):
     frame = next(f for f in walk_frames if f.name.startswith("back_near"))
-    seg = segment_people(frame.depth, frame.intrinsics, scale=scale)
+    seg = segment_people(frame.depth, frame.intrinsics)
     assert len(seg.people) == 1
     assert seg.rejected.get("in_gap", 0) >= 1  # those wall patches were candidates, turned down
     wall_behind = ~frame.silhouette & (frame.depth > 0)
@@ -184,8 +180,7 @@ def test_floor_of_synthetic_room(walk_frames):
         assert np.isclose(np.linalg.norm(floor.normal), 1.0)
 
 
-@pytest.mark.parametrize("scale", SCALES)
-def test_person_cut_by_the_image_border_is_found(walk_frames, scale):
+def test_person_cut_by_the_image_border_is_found(walk_frames):
     frame = next(f for f in walk_frames if f.name.startswith("front"))
     # Slide the image left (a level camera turned: floor and wall stay planes) until the
     # person's left half leaves it; as many blank columns appear on the right.
@@ -195,7 +190,7 @@ def test_person_cut_by_the_image_border_is_found(walk_frames, scale):
     silhouette = np.zeros_like(frame.silhouette)
     silhouette[:, :-shift] = frame.silhouette[:, shift:]
     assert silhouette[:, 0].any() and silhouette.sum() < 0.7 * frame.silhouette.sum()
-    seg = segment_people(depth, frame.intrinsics, scale=scale)
+    seg = segment_people(depth, frame.intrinsics)
     assert len(seg.people) == 1
     person = seg.people[0]
     assert person.touches_border and person.box[0] == 0
@@ -204,8 +199,7 @@ def test_person_cut_by_the_image_border_is_found(walk_frames, scale):
 
 # ------------------------------------------------------------------ analytic scenes
 @pytest.mark.parametrize("pitch, roll", [(0, 0), (20, 0), (40, 5), (45, -8)])
-@pytest.mark.parametrize("scale", SCALES)
-def test_floor_only_gives_the_floor_and_nobody(pitch, roll, scale):
+def test_floor_only_gives_the_floor_and_nobody(pitch, roll):
     up = camera_up(pitch, roll)
     depth = plane_depth(up, 1.3)  # the floor 1.3 m below the lens: up @ p + 1.3 = 0
     floor = fit_floor(depth, KINECT)
@@ -215,24 +209,22 @@ def test_floor_only_gives_the_floor_and_nobody(pitch, roll, scale):
     assert abs(floor.tilt_deg - angle_deg(up, np.array([0.0, -1.0, 0.0]))) < 0.5
     heights = floor.height(KINECT.point_map(depth)[depth > 0])
     assert np.median(np.abs(heights)) < 0.02
-    seg = segment_people(depth, KINECT, floor=floor, scale=scale)
+    seg = segment_people(depth, KINECT, floor=floor)
     assert seg.people == () and not seg.labels.any()
 
 
 @pytest.mark.parametrize("normal, offset", [((0, 0, -1), 2.5), ((0.3, 0, -1), 3.0), ((0, 0.2, -1), 1.0),
                                             ((0, 0, -1), 0.9)])
-@pytest.mark.parametrize("scale", SCALES)
-def test_flat_wall_filling_the_frame_is_nobody(normal, offset, scale):
+def test_flat_wall_filling_the_frame_is_nobody(normal, offset):
     depth = plane_depth(normal, offset)
     assert (depth > 0).mean() > 0.95
-    seg = segment_people(depth, KINECT, scale=scale)
+    seg = segment_people(depth, KINECT)
     assert seg.floor is None
     assert seg.people == (), seg.rejected
     assert sum(seg.rejected.values()) >= 1
 
 
-@pytest.mark.parametrize("scale", SCALES)
-def test_furniture_is_nobody(scale):
+def test_furniture_is_nobody():
     """A chair-sized and a table-sized box standing on the floor before a wall (ray cast)."""
     import open3d as o3d
 
@@ -250,7 +242,7 @@ def test_furniture_is_nobody(scale):
     depth, _, boxes = Renderer(KINECT).render(np.concatenate(verts), np.concatenate(tris), room)
     depth = KinectNoise().apply(depth, np.random.default_rng(1))
     assert boxes.mean() > 0.05
-    seg = segment_people(depth, KINECT, scale=scale)
+    seg = segment_people(depth, KINECT)
     assert seg.floor is not None and abs(seg.floor.offset - 1.2) < 0.02
     assert seg.people == (), [p.as_dict() for p in seg.people]
 
@@ -279,8 +271,6 @@ def test_bad_shapes_and_arguments_raise_clear_errors():
     for bad in (0, -1, 2.5, True):
         with pytest.raises(ConfigError, match="max_people"):
             segment_people(good, KINECT, max_people=bad)
-        with pytest.raises(ConfigError, match="scale must be a positive integer"):
-            segment_people(good, KINECT, scale=bad)
     with pytest.raises(ConfigError, match="unknown tuning option.*min_widht_m"):
         segment_people(good, KINECT, min_widht_m=0.1)
     with pytest.raises(ConfigError, match="unknown tuning option"):
@@ -313,12 +303,11 @@ FIVE_BACKS = {"green shirt": (80, 175), "blue top": (195, 190), "white shirt": (
 
 
 @needs_assets
-@pytest.mark.parametrize("scale", SCALES)
-def test_five_people_each_a_segment_of_plausible_height(scale):
+def test_five_people_each_a_segment_of_plausible_height():
     calibration = json.loads((FIVE / "five_people_intrinsics.json").read_text())
     intrinsics = Intrinsics(**{k: calibration[k] for k in ("width", "height", "fx", "fy", "cx", "cy")})
     depth = five_people_depth()
-    seg = segment_people(depth, intrinsics, scale=scale)
+    seg = segment_people(depth, intrinsics)
     check_invariants(seg, depth.shape)
     assert len(seg.people) == 5, seg.as_dict()
     heads, backs = labels_at(seg, FIVE_HEADS), labels_at(seg, FIVE_BACKS)
@@ -358,13 +347,12 @@ def skeltrack_depth(name: str) -> np.ndarray:
 
 
 @needs_assets
-@pytest.mark.parametrize("scale", SCALES)
-def test_skeltrack_frames_one_or_two_people(scale):
+def test_skeltrack_frames_one_or_two_people():
     names = [p.name.split("-")[-1] for p in skeltrack_frames()]
     assert len(names) == 12 and TWO_PEOPLE_FRAMES <= set(names)
     for name in names:
         depth = skeltrack_depth(name)
-        seg = segment_people(depth, KINECT, scale=scale)
+        seg = segment_people(depth, KINECT)
         check_invariants(seg, depth.shape)
         assert seg.floor is None, name  # upper bodies, no floor in view
         assert len(seg.people) == (2 if name in TWO_PEOPLE_FRAMES else 1), f"{name}: {seg.as_dict()}"
@@ -384,11 +372,10 @@ SKELTRACK_POINTS = {  # hand-labelled pixels (x, y)
 
 @needs_assets
 @pytest.mark.parametrize("name", sorted(SKELTRACK_POINTS))
-@pytest.mark.parametrize("scale", SCALES)
-def test_skeltrack_hands_and_overlapping_people_go_to_their_owner(name, scale):
+def test_skeltrack_hands_and_overlapping_people_go_to_their_owner(name):
     """A hand in front of the other person, and fists cut off from the arm by a depth step
     (0.5 m nearer than the chest), belong to their owner's mask."""
-    seg = segment_people(skeltrack_depth(name), KINECT, scale=scale)
+    seg = segment_people(skeltrack_depth(name), KINECT)
     labels = labels_at(seg, SKELTRACK_POINTS[name])
     front = {labels[k] for k in labels if k.startswith("front")}
     back = {labels[k] for k in labels if k.startswith("back")}

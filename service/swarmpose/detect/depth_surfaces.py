@@ -8,7 +8,7 @@ Camera frame: OpenCV axes, x right, y down, z forward, metres; pixels px.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -116,18 +116,6 @@ class SurfaceFrame:
         self.height, self.across, self.along = axis_factors(intrinsics, up)
         self.height_offset = 0.0 if floor is None else float(floor.offset)
         self.footprint = np.float32(1.0 / (intrinsics.fx * intrinsics.fy))
-
-    def subsampled(self, scale: int) -> SurfaceFrame:
-        """This frame with every ``scale``-th pixel of each row and column (nearest: depth edges
-        stay edges) and its camera scaled to match; pixel settings (``stride``, ``max_fill_px``)
-        scaled too, so lengths, areas and steps keep their meaning. Pixel (u, v) of the result
-        is pixel (scale u, scale v) of this frame."""
-        depth = self.depth[::scale, ::scale]
-        i = self.intrinsics
-        small = Intrinsics(depth.shape[1], depth.shape[0], i.fx / scale, i.fy / scale, i.cx / scale, i.cy / scale)
-        cfg = replace(self.cfg, stride=max(1, round(self.cfg.stride / scale)),
-                      max_fill_px=round(self.cfg.max_fill_px / scale))
-        return SurfaceFrame(np.ascontiguousarray(depth), small, self.floor, cfg)
 
     def step(self, z: np.ndarray) -> np.ndarray:
         """The largest depth difference (m) between neighbours of one surface at depth z (m)."""

@@ -55,14 +55,8 @@ height figures then refer to what is visible. With no floor in view the height t
 camera's axes, which assumes a roughly level camera. Far away a Kinect loses thin limbs to
 dropped edge pixels: the mask's IoU with the true silhouette is 0.88 at 6 m and 0.7 at 7.5 m
 (synthetic, simulated Kinect noise).
-Resolution: with ``scale`` 2 (what the tracking pipeline runs) steps 1-6 work on every other
-pixel of each row and column, measuring as many points per person as at full resolution (the
-stride halves), and each mask is brought back to full resolution before step 7: a subsampled
-pixel's block less its pixels more than a depth step off, then step 7's rim gives the edge back,
-so the masks differ from full resolution's by about a pixel along their edges.
-Time: 20-40 ms for a 640x480 frame on one core at full resolution, about two thirds of that
-with ``scale`` 2; about 5 ms of it fits the floor (pass a :class:`FloorPlane` found once for a
-fixed camera to save it).
+Time: 20-40 ms for a 640x480 frame on one core, about 5 ms of it fitting the floor (pass a
+:class:`FloorPlane` found once for a fixed camera to save it).
 """
 
 from __future__ import annotations
@@ -76,7 +70,7 @@ from swarmpose.core.errors import ConfigError
 from swarmpose.detect.depth_surfaces import Coords, PeopleTuning, Piece, SurfaceFrame, supported_top
 from swarmpose.detect.floor import FloorPlane, check_depth, fit_floor
 from swarmpose.detect.peaks import find_peaks
-from swarmpose.detect.person_masks import attach_fragments, finish_mask, full_resolution
+from swarmpose.detect.person_masks import attach_fragments, finish_mask
 
 BORDER_PX = 2
 """A mask this close (px) to the edge of the image, or of a blank band along it, touches it."""
@@ -315,53 +309,26 @@ def _resolve_floor(floor, depth: np.ndarray, intrinsics: Intrinsics) -> FloorPla
 
 
 def segment_people(depth_m: np.ndarray, intrinsics: Intrinsics, *, floor: FloorPlane | None | str = "auto",
-                   max_people: int = 6, scale: int = 1, **tuning) -> Segmentation:
+                   max_people: int = 6, **tuning) -> Segmentation:
     """The people in one depth frame (see the module docstring for the method and its limits).
 
     depth_m: (H, W) metres, 0 or NaN = no measurement, registered to ``intrinsics``;
     floor: ``"auto"`` to fit it (:func:`fit_floor`), a :class:`FloorPlane` found before (a
     fixed camera: saves ~10 ms a frame), or None to work without one; max_people: at most this
-    many people are kept, the largest by frontal area; scale: steps 1-6 run on every
-    ``scale``-th pixel of each row and column (2: a quarter of the pixels), and the masks are
-    brought back to full resolution before step 7 (:func:`~swarmpose.detect.person_masks.full_resolution`);
-    tuning: overrides of :class:`PeopleTuning` fields. Raises ShapeError for a depth that is not
+    many people are kept, the largest by frontal area; tuning: overrides of
+    :class:`PeopleTuning` fields. Raises ShapeError for a depth that is not
     (intrinsics.height, intrinsics.width) and ConfigError for a bad argument; a frame with
     nobody in it (empty, a wall, only floor) gives no people.
     """
     cfg = PeopleTuning.from_kwargs(tuning)
-    for name, value in (("max_people", max_people), ("scale", scale)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-            raise ConfigError(f"segment_people: {name} must be a positive integer, got {value!r}")
+    if isinstance(max_people, bool) or not isinstance(max_people, (int, np.integer)) or max_people < 1:
+        raise ConfigError(f"segment_people: max_people must be a positive integer, got {max_people!r}")
     depth = check_depth(depth_m, intrinsics)
     floor = _resolve_floor(floor, depth, intrinsics)
     labels = np.zeros(depth.shape, np.int32)
     if not (depth > 0).any():
         return Segmentation(floor, (), labels, {})
     frame = SurfaceFrame(depth, intrinsics, floor, cfg)
-    coarse = frame if scale == 1 else frame.subsampled(int(scale))
-    people, reasons = _people(coarse, max_people)
-    if coarse is not frame:
-        people = [full_resolution(coarse, frame, piece, int(scale)) for piece in people]
-    people.sort(key=lambda p: p.stats["centroid"][2])  # nearest first: occluders claim shared pixels
-    taken = np.zeros(depth.shape, bool)  # every person's own pixels first, then what each adds
-    for piece in people:
-        taken[piece.box[1]:piece.box[3], piece.box[0]:piece.box[2]] |= piece.mask
-    sensor = _sensor_area(depth)
-    segments = []
-    for piece in people:
-        mask = finish_mask(frame, piece, taken)
-        taken |= mask
-        segments.append(_segment(frame, mask, sensor))
-    segments.sort(key=lambda s: 0.5 * (s.box[0] + s.box[2]))
-    for k, s in enumerate(segments, start=1):
-        labels[s.mask] = k
-    return Segmentation(floor, tuple(segments), labels, reasons)
-
-
-def _people(frame: SurfaceFrame, max_people: int) -> tuple[list[Piece], dict[str, int]]:
-    """Steps 1-6 on ``frame``: the people's pieces (at most ``max_people``, the largest by
-    frontal area) and the rejections counted by reason."""
-    cfg = frame.cfg
     people, rejected = [], []
     for surface in _surfaces(frame):
         frame.judge(surface)
@@ -381,7 +348,20 @@ def _people(frame: SurfaceFrame, max_people: int) -> tuple[list[Piece], dict[str
         people.sort(key=lambda p: -p.stats["area_m2"])
         reasons["beyond_max_people"] = len(people) - max_people
         people = people[:max_people]
-    return people, reasons
+    people.sort(key=lambda p: p.stats["centroid"][2])  # nearest first: occluders claim shared pixels
+    taken = np.zeros(depth.shape, bool)  # every person's own pixels first, then what each adds
+    for piece in people:
+        taken[piece.box[1]:piece.box[3], piece.box[0]:piece.box[2]] |= piece.mask
+    sensor = _sensor_area(depth)
+    segments = []
+    for piece in people:
+        mask = finish_mask(frame, piece, taken)
+        taken |= mask
+        segments.append(_segment(frame, mask, sensor))
+    segments.sort(key=lambda s: 0.5 * (s.box[0] + s.box[2]))
+    for k, s in enumerate(segments, start=1):
+        labels[s.mask] = k
+    return Segmentation(floor, tuple(segments), labels, reasons)
 
 
 __all__ = ["PeopleTuning", "PersonSegment", "Segmentation", "segment_people"]

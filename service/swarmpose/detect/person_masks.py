@@ -1,7 +1,6 @@
 """The finishing half of :mod:`swarmpose.detect.people` (steps 6 and 7 of its docstring):
 small rejected pieces (a hand split off by a depth step) given back to the person they
-belong to, a piece found on a subsampled frame brought back to full resolution, and each
-person's mask closed over the pixels without depth inside it.
+belong to, and each person's mask closed over the pixels without depth inside it.
 """
 
 from __future__ import annotations
@@ -97,20 +96,3 @@ def finish_mask(frame: SurfaceFrame, piece: Piece, taken: np.ndarray) -> np.ndar
     out = np.zeros((H, W), bool)
     out[y0:y1, x0:x1] = mask
     return out
-
-
-def full_resolution(coarse: SurfaceFrame, frame: SurfaceFrame, piece: Piece, scale: int) -> Piece:
-    """A piece found on ``coarse`` (``frame`` subsampled by ``scale``, :meth:`SurfaceFrame.subsampled`)
-    as a piece of ``frame``: each coarse pixel stands for its ``scale`` x ``scale`` block, less the
-    pixels whose depth is missing or more than a depth step from the coarse pixel's (the
-    background beside a silhouette's edge). The pixels of the person's edge this leaves out come
-    back with :func:`finish_mask`'s rim. Measurements (``stats``) and ``reason`` are kept."""
-    H, W = frame.depth.shape
-    x0, y0, x1, y1 = piece.box
-    box = (x0 * scale, y0 * scale, min(x1 * scale, W), min(y1 * scale, H))
-    h, w = box[3] - box[1], box[2] - box[0]
-    mask = piece.mask.repeat(scale, 0).repeat(scale, 1)[:h, :w]
-    z_coarse = coarse.depth[y0:y1, x0:x1].repeat(scale, 0).repeat(scale, 1)[:h, :w]
-    z = frame.depth[box[1]:box[3], box[0]:box[2]]
-    mask &= (z > 0) & (np.abs(z - z_coarse) <= frame.step(z_coarse))
-    return Piece(box, mask, stats=piece.stats, reason=piece.reason)

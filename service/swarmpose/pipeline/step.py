@@ -51,9 +51,6 @@ from swarmpose.tracking.result import FrameResult
 log = logging.getLogger(__name__)
 FLOOR_REFIT_FRAMES = 15
 """The floor plane is fitted again every this many frames (8 ms a fit; a camera may move)."""
-SEGMENT_SCALE = 2
-"""The people are found on every other depth pixel (:func:`segment_people`'s ``scale``): masks
-within a pixel of full resolution's, at about two thirds of its time."""
 NOBODY = "no person found (none in the depth whose detection shows a person)"
 EMPTY_DEPTH = "the depth image has no valid pixels (every one 0: no measurement)"
 
@@ -194,7 +191,7 @@ class FramePipeline:
             try:
                 reuse = self._floor.reusable(frame.intrinsics)
                 segmentation = segment_people(frame.depth, frame.intrinsics, max_people=2 * self.max_people,
-                                              floor=self._floor.plane if reuse else "auto", scale=SEGMENT_SCALE)
+                                              floor=self._floor.plane if reuse else "auto")
                 self._floor.used(segmentation.floor, frame.intrinsics, fitted=not reuse)
             except Exception as exc:  # a segmentation that throws: the frame is detected as a whole
                 log.debug("frame %d: segmentation failed: %s", frame.index, exc_message(exc))
