@@ -270,6 +270,25 @@ def test_tracking_lod_keeps_skinning(body):
     assert abs(lod.height - body.height) < 0.03
 
 
+def test_tracking_lod_is_kept_in_the_cache_and_read_back_unchanged(body, monkeypatch, tmp_path):
+    """A second process's level of detail comes from the cache (the decimation not run again) and
+    equals the decimation computed afresh; another mesh gets an entry of its own."""
+    monkeypatch.setenv("SWARMPOSE_CACHE_DIR", str(tmp_path))
+    first = body.tracking_lod(1500)
+    assert len(list((tmp_path / "lods").glob("*.npz"))) == 1
+    monkeypatch.setattr(type(body), "_decimated", lambda *_: pytest.fail("decimated again"))
+    again = body.tracking_lod(1500)
+    monkeypatch.undo()
+    fresh = body._decimated(1500)
+    for lod in (first, again):
+        for name in ("vertices", "triangles", "skin_indices", "skin_weights"):
+            np.testing.assert_array_equal(getattr(lod, name), fresh[name])
+    assert again.name == first.name and again.metadata["lod_triangles"] == len(fresh["triangles"])
+    monkeypatch.setenv("SWARMPOSE_CACHE_DIR", str(tmp_path))
+    body.tracking_lod(1000)
+    assert len(list((tmp_path / "lods").glob("*.npz"))) == 2
+
+
 def test_build_is_memoised_and_deterministic():
     shape = BodyShape(height=1.7, leg_girth=1.1)
     first = build_parametric_body(shape)

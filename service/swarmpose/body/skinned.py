@@ -7,8 +7,11 @@ Shapes and units: ``V`` vertices, ``F`` triangles, ``B`` bones, ``K`` = 4 influe
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from importlib.metadata import version
+from pathlib import Path
 
 import numpy as np
 
@@ -22,6 +25,7 @@ from swarmpose.body.kinematics import (
     transform_points,
 )
 from swarmpose.body.skeleton import JOINT_INDEX, POINT_NAMES, TRACKING_JOINTS
+from swarmpose.core.cache import cache_key, cached_arrays
 from swarmpose.core.errors import AssetError, ConfigError, ShapeError, check_shape
 from swarmpose.core.open3d_import import open3d
 
@@ -183,27 +187,39 @@ class SkinnedBody:
         """This body decimated to about ``triangles`` triangles, skinning preserved.
 
         Quadric decimation (Open3D) moves vertices; each new vertex takes the skin weights
-        of the nearest original vertex, and the named points and bones are unchanged.
+        of the nearest original vertex, and the named points and bones are unchanged. Kept in
+        the user's cache (:mod:`swarmpose.core.cache`) under the mesh, its skin and this code, so
+        that a later process loads it instead of decimating again.
         """
         if triangles < MIN_LOD_TRIANGLES:
             raise ConfigError(f"a tracking level of detail needs at least {MIN_LOD_TRIANGLES} triangles, "
                               f"got {triangles}")
         if triangles >= len(self.triangles):
             return self
-        o3d = open3d()
+        mesh = hashlib.sha256()
+        for array in (self.vertices, self.triangles, self.skin_indices, self.skin_weights):
+            mesh.update(np.ascontiguousarray(array).tobytes())
+        key = cache_key(int(triangles), mesh.hexdigest(), version("open3d"), sources=(Path(__file__),))
+        low = cached_arrays("lods", key, lambda: self._decimated(int(triangles)))
+        return replace(self, name=f"{self.name}@{len(low['triangles'])}", vertices=np.array(low["vertices"]),
+                       triangles=np.array(low["triangles"]), skin_indices=np.array(low["skin_indices"]),
+                       skin_weights=np.array(low["skin_weights"]),
+                       metadata={**self.metadata, "lod_triangles": int(len(low["triangles"]))})
+
+    def _decimated(self, triangles: int) -> dict[str, np.ndarray]:
+        """:meth:`tracking_lod`'s arrays, computed: vertices, triangles, skin_indices, skin_weights."""
         from scipy.spatial import cKDTree
 
+        o3d = open3d()
         mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.array(self.vertices, dtype=np.float64)),
                                          o3d.utility.Vector3iVector(np.array(self.triangles, dtype=np.int32)))
-        low = mesh.simplify_quadric_decimation(target_number_of_triangles=int(triangles))
+        low = mesh.simplify_quadric_decimation(target_number_of_triangles=triangles)
         low.remove_unreferenced_vertices()
         low.remove_degenerate_triangles()
         verts = np.asarray(low.vertices, dtype=np.float64)
-        tris = np.asarray(low.triangles, dtype=np.int32)
         _, nearest = cKDTree(self.vertices).query(verts)
-        return replace(self, name=f"{self.name}@{len(tris)}", vertices=verts, triangles=tris,
-                       skin_indices=self.skin_indices[nearest], skin_weights=self.skin_weights[nearest],
-                       metadata={**self.metadata, "lod_triangles": int(len(tris))})
+        return {"vertices": verts, "triangles": np.asarray(low.triangles, dtype=np.int32),
+                "skin_indices": self.skin_indices[nearest], "skin_weights": self.skin_weights[nearest]}
 
 
 def body_frame_bind_matrices(heads: np.ndarray) -> np.ndarray:
