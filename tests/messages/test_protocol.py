@@ -214,3 +214,15 @@ def test_a_message_of_the_previous_version_is_refused_naming_the_version():
         joint.pop("orientation_xyzw")
     with pytest.raises(ProtocolError, match="invalid at version"):
         validate(old)
+
+
+def test_json_rows_round_each_row_as_python_does_and_drop_rows_that_are_not_finite():
+    """The message's vectorised rounding against Python's round() of each entry (json_vector)."""
+    from swarmpose.messages.build import json_rows, json_vector
+
+    rows = np.random.default_rng(3).normal(scale=5.0, size=(20000, 3))
+    rows[7, 0], rows[11, 2], rows[12, 1] = np.nan, np.inf, -np.inf
+    for digits in (2, 4, 6):
+        got = json_rows(rows, digits)
+        assert got == [json_vector(row, digits) for row in rows]
+        assert got[7] is None and got[11] is None and got[12] is None and got[0] is not None

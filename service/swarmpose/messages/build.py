@@ -49,6 +49,13 @@ def json_vector(v: np.ndarray, digits: int) -> list[float] | None:
     return [round(float(x), digits) for x in v] if np.all(np.isfinite(v)) else None
 
 
+def json_rows(values: np.ndarray, digits: int) -> list[list[float] | None]:
+    """Each row of ``values`` (K, D) as a JSON list rounded to ``digits`` decimals, None for a row
+    with an entry that is not finite (:func:`json_vector` of each row, in one pass)."""
+    finite = np.all(np.isfinite(values), axis=1)
+    return [row if ok else None for row, ok in zip(np.round(values, digits).tolist(), finite.tolist())]
+
+
 def full_joint_arrays(joints3d: np.ndarray, joints2d: np.ndarray, confidence: np.ndarray,
                       skeleton: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, ...]:
     """The full joint set's positions (K, 3), pixels (K, 2), confidences (K,) and orientations (K, 4)
@@ -87,9 +94,10 @@ def body_message(body_id: int, state: str, reason: str, pose: np.ndarray | None,
     evaluation joints they follow (:func:`~swarmpose.body.joint_set.skeleton_confidence`).
     """
     positions, pixels, full_confidence, orientations = full_joint_arrays(joints3d, joints2d, confidence, skeleton)
-    joints = {name: {"position_m": json_vector(p3, 6), "orientation_xyzw": json_vector(q, 6),
-                     "pixel": json_vector(p2, 2), "confidence": round(float(np.clip(c, 0.0, 1.0)), 3)}
-              for name, p3, q, p2, c in zip(SKELETON_NAMES, positions, orientations, pixels, full_confidence)}
+    rounded_confidence = np.round(np.clip(full_confidence, 0.0, 1.0), 3).tolist()
+    joints = {name: {"position_m": p3, "orientation_xyzw": q, "pixel": p2, "confidence": c}
+              for name, p3, q, p2, c in zip(SKELETON_NAMES, json_rows(positions, 6), json_rows(orientations, 6),
+                                            json_rows(pixels, 2), rounded_confidence)}
     if velocities is not None:
         for name, v in zip(EVAL_JOINTS, velocities):
             if joints[name]["position_m"] is not None and np.all(np.isfinite(v)):
