@@ -172,7 +172,7 @@ def test_a_map_that_lacks_keys_or_names_absent_joints_says_which(tmp_path):
     ("clip.bvh?scale=2", "options after '?' are map=FILE.toml, units=UNIT and up=AXIS"),
     ("clip.bvh?up=y&up=z", "each once"),
     ("clip.bvh?map=", "map has no value"),
-    ("clip.bvh?map=nowhere.toml", "joint map nowhere.toml: no such file"),
+    ("clip.bvh?map=nowhere.toml", "joint map nowhere.toml does not exist; check the path after ?map="),
 ])
 def test_bad_spec_options_are_named(spec, message):
     with pytest.raises(MotionError, match=re.escape(message)):
@@ -180,7 +180,7 @@ def test_bad_spec_options_are_named(spec, message):
 
 
 @pytest.mark.parametrize(("text", "message"), [
-    ("joints = [", "not TOML"),
+    ("joints = [", "is not valid TOML"),
     ('units = "cm"\n', "has no [joints] table"),
     ('[joints]\nelbow = "E"\n', "unknown keys ['elbow']"),
     ("[joints]\nneck = 3\n", "['neck'] must be BVH joint names"),

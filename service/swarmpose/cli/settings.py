@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 from collections.abc import Iterable, Mapping
 from dataclasses import fields
 from pathlib import Path
@@ -22,11 +21,7 @@ from typing import Any, TypeVar
 
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.settings import build, convert, default_of, format_value, leaves
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
+from swarmpose.core.toml_file import read_toml_file
 
 ENV_PREFIX = "SWARMPOSE_"
 ENV_CONFIG = "SWARMPOSE_CONFIG"
@@ -134,14 +129,7 @@ def read_toml(path: str | Path, cls: type) -> dict:
     tables (``[tracker]``, ``[swarmpose.zenoh]``, ...). ConfigError naming the file for an
     unknown key, a setting given twice or a key in a section table it does not belong to."""
     path = Path(path).expanduser()
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"config file {path} does not exist; pass an existing TOML file to --config") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"config file {path} cannot be read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"config file {path} is not valid TOML: {exc}") from None
+    data = read_toml_file(path, ConfigError, "config file", "pass an existing TOML file to --config")
     inner = data.pop("swarmpose", {})
     if not isinstance(inner, dict):
         raise ConfigError(f"config file {path}: swarmpose must be a table ([swarmpose]), got {inner!r}")

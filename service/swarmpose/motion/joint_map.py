@@ -25,18 +25,13 @@ the standard library's ``tomllib``)::
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from swarmpose.core.errors import MotionError
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
+from swarmpose.core.toml_file import read_toml_file
 
 SIDED = ("collar", "shoulder", "elbow", "wrist", "hip", "knee", "ankle")
 REQUIRED = ("neck", "head", *(f"{side}_{part}" for side in ("left", "right") for part in SIDED))
@@ -117,14 +112,7 @@ def read_joint_map(path: str | Path) -> JointMap:
     names an unknown key or gives a name that is not a string.
     """
     path = Path(path).expanduser()
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise MotionError(f"joint map {path}: no such file; check the path after ?map=") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MotionError(f"joint map {path}: cannot be read ({exc}); pass a TOML text file") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise MotionError(f"joint map {path}: not TOML ({exc}); {MAP_HELP}") from None
+    data = read_toml_file(path, MotionError, "joint map", "check the path after ?map=", MAP_HELP)
     joints = data.get("joints")
     if not isinstance(joints, dict):
         raise MotionError(f"joint map {path}: has no [joints] table; {MAP_HELP}")
