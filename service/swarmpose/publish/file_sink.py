@@ -15,10 +15,32 @@ def write_error(what: str, path: Path, exc: BaseException) -> OutputError:
     return OutputError(f"cannot write {what} {path}: {reason}; choose a writable output folder with free space")
 
 
-class FileSink:
-    """A sink writing one file: opened at construction, flushed per frame, closed once."""
+class ClosingSink:
+    """What the sinks that write one output (``self._file``: anything with ``close()``) share: status
+    messages are not recorded, and the output is closed once, a failure raising OutputError."""
 
     what = "file"
+    close_errors: tuple[type[BaseException], ...] = (OSError,)
+    """What closing the output may raise that means it could not be written."""
+    path: Path
+    _closed: bool
+
+    def status(self, message: dict) -> None:
+        """Status messages are not recorded."""
+
+    def close(self) -> None:
+        """Flush and close the output (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._file.close()
+        except self.close_errors as exc:
+            raise write_error(self.what, self.path, exc) from exc
+
+
+class FileSink(ClosingSink):
+    """A sink writing one file: opened at construction, flushed per frame, closed once."""
 
     def __init__(self, path: str | Path, mode: str, **kwargs) -> None:
         self.path = Path(path)
@@ -36,18 +58,5 @@ class FileSink:
     def _flush(self) -> None:
         try:
             self._file.flush()
-        except OSError as exc:
-            raise write_error(self.what, self.path, exc) from exc
-
-    def status(self, message: dict) -> None:
-        """Status messages are not recorded."""
-
-    def close(self) -> None:
-        """Flush and close the file (idempotent)."""
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            self._file.close()
         except OSError as exc:
             raise write_error(self.what, self.path, exc) from exc

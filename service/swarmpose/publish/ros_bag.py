@@ -34,7 +34,7 @@ import numpy as np
 from swarmpose.body.joint_set import SKELETON_NAMES, SKELETON_PARENTS
 from swarmpose.body.kinematics import matrix_to_quaternion
 from swarmpose.core.errors import OutputError
-from swarmpose.publish.file_sink import write_error
+from swarmpose.publish.file_sink import ClosingSink, write_error
 from swarmpose.publish.overlay import id_color
 from swarmpose.publish.ros_skeleton import body_joints, link_points, parent_relative, to_xyzw
 from swarmpose.sources.base import Frame
@@ -101,11 +101,12 @@ def remove_earlier_bag(folder: Path) -> bool:
     return True
 
 
-class RosBagSink:
+class RosBagSink(ClosingSink):
     """Writes the frame messages (and with ``depth`` each frame's depth) into the ROS 2 bag at
     ``folder`` (created; it must not exist: :func:`remove_earlier_bag`)."""
 
     what = "the ROS 2 bag"
+    close_errors = (Exception,)  # rosbags' WriterError, OSError: finishing the MCAP file or metadata.yaml
 
     def __init__(self, folder: str | Path, depth: bool = False) -> None:
         from rosbags.rosbag2 import StoragePlugin, Writer
@@ -119,12 +120,12 @@ class RosBagSink:
         self._store = get_typestore(Stores.ROS2_JAZZY)
         self._types = self._store.types
         try:
-            self._writer = Writer(self.path, version=8, storage_plugin=StoragePlugin.MCAP)
-            self._writer.open()
+            self._file = Writer(self.path, version=8, storage_plugin=StoragePlugin.MCAP)
+            self._file.open()
             topics = {TF_TOPIC: "tf2_msgs/msg/TFMessage", MARKER_TOPIC: "visualization_msgs/msg/MarkerArray"}
             if depth:
                 topics |= {DEPTH_TOPIC: "sensor_msgs/msg/Image", CAMERA_INFO_TOPIC: "sensor_msgs/msg/CameraInfo"}
-            self._connections = {topic: self._writer.add_connection(topic, kind, typestore=self._store)
+            self._connections = {topic: self._file.add_connection(topic, kind, typestore=self._store)
                                  for topic, kind in topics.items()}
         except Exception as exc:  # rosbags' WriterError, OSError: either way the bag cannot be written
             raise write_error(self.what, self.path, exc) from exc
@@ -210,7 +211,7 @@ class RosBagSink:
 
     def _write(self, topic: str, msg, stamp: int) -> None:
         connection = self._connections[topic]
-        self._writer.write(connection, int(stamp), self._store.serialize_cdr(msg, connection.msgtype))
+        self._file.write(connection, int(stamp), self._store.serialize_cdr(msg, connection.msgtype))
 
     # -- the sink ----------------------------------------------------------------------------
     def frame(self, message: dict, frame: Frame | None = None) -> None:
@@ -245,18 +246,6 @@ class RosBagSink:
             raise write_error(self.what, self.path, exc) from exc
         self.frames += 1
 
-    def status(self, message: dict) -> None:
-        """Status messages are not recorded."""
-
-    def close(self) -> None:
-        """Finish the MCAP file and write ``metadata.yaml`` (idempotent)."""
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            self._writer.close()
-        except Exception as exc:  # rosbags' WriterError, OSError
-            raise write_error(self.what, self.path, exc) from exc
 
 __all__ = ["BAG_NAME", "MARKER_TOPIC", "TF_TOPIC", "RosBagSink", "is_earlier_bag", "joint_frame", "message_frame",
            "remove_earlier_bag", "rosbags_missing"]
