@@ -183,3 +183,40 @@ def test_the_full_set_names_azure_joints_and_takes_its_confidence_from_the_evalu
     assert all(full[n] == given[n] for n in EVAL_JOINTS)
     assert full["left_hand"] == given["left_wrist"] and full["nose"] == given["head"]
     assert full["pelvis"] == pytest.approx((given["left_hip"] + given["right_hip"]) / 2)
+
+
+BVH_JOINTS = {"pelvis": "Hips", "left_shoulder": "LeftShoulder", "right_shoulder": "RightShoulder",
+              "left_elbow": "LeftElbow", "right_elbow": "RightElbow", "left_hip": "LeftHip", "right_hip": "RightHip",
+              "left_knee": "LeftKnee", "right_knee": "RightKnee"}
+"""Our joints and the CMU 3dsMax joints (the clips below) whose global rotation each one's frame follows."""
+HINGE_MEDIAN_DEG = 8.0
+"""The elbows are hinges on the body: the forearm's twist about its bone in the capture stays out
+of the elbow's frame (measured medians 3-7 degrees)."""
+
+
+@pytest.mark.parametrize("clip", ["animdrawings_cmu1_jumping_jacks.bvh", "bvh11_131_01.bvh"])
+def test_a_joints_frame_turns_as_the_captured_joint_did(clip):
+    """Against the BVH's own rotations: over 16 frames of a clip, how far each joint's frame turned
+    since the first frame equals how far the clip's joint turned (the angle of the change, which
+    does not depend on how the file's axes map onto the body's), within 1 degree at the median (the
+    elbows: HINGE_MEDIAN_DEG)."""
+    from swarmpose.motion.bvh import read_bvh
+    from swarmpose.motion.retarget import load_motion
+
+    path = MOCAP / clip
+    if not path.is_file():
+        pytest.skip(f"motion capture not found at {path}")
+    body = load_body("builtin")
+    motion, captured = load_motion(str(path), body), read_bvh(str(path))
+    frames = np.linspace(0, len(motion) - 1, 16).astype(int)
+    quats = Rotation.from_matrix(motion.root_rotation[frames]).as_quat()
+    poses = np.concatenate([motion.root_offset[frames], quats[:, [3, 0, 1, 2]], motion.angles[frames]], axis=1)
+    _, ours = posed_joints(body, poses)
+    theirs, _ = captured.global_transforms()
+    for name, bvh_name in BVH_JOINTS.items():
+        mine, bone = ours[:, SKELETON_NAMES.index(name)], theirs[frames, captured.joint_names.index(bvh_name)]
+        turned = Rotation.from_matrix(mine @ mine[0].T).magnitude()
+        captured_turn = Rotation.from_matrix(bone @ bone[0].T).magnitude()
+        assert np.degrees(captured_turn.max()) > 10, name  # the clip moves it
+        error = np.degrees(np.median(np.abs(turned - captured_turn)))
+        assert error <= (HINGE_MEDIAN_DEG if name.endswith("elbow") else 1.0), (name, error)
