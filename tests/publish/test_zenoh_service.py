@@ -385,3 +385,19 @@ def test_serve_configured_by_environment_publishes_and_stops_on_sigterm(wave_seq
         if proc.poll() is None:
             proc.kill()
         sub.close()
+
+
+def test_frames_that_arrive_after_the_workers_end_are_still_delivered():
+    """zenoh does not order a liveliness token's end after the frames published before it (the demo's
+    subscriber once got 2 of 3 frames): a frame that comes within END_GRACE_S of the end is delivered,
+    and the iterator then stops without waiting for its timeout."""
+    from swarmpose.publish.client import _WORKERS_ENDED
+
+    with Client("cam7", listen=[f"tcp/127.0.0.1:{free_port()}"], multicast=False) as client:
+        client.ended, client.live = {"cam7"}, set()  # the worker's token went away ...
+        client._enqueue(_WORKERS_ENDED)
+        late = {"schema": "swarmpose.frame", "frame": 41}
+        timer = threading.Timer(0.3, client._enqueue, [late])  # ... before its last frame arrived
+        timer.start()
+        assert list(client.frames(timeout=600, until_workers_end=True)) == [late]
+        timer.join()

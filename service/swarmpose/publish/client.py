@@ -29,6 +29,9 @@ from swarmpose.publish.zenoh_link import open_session, zenoh_config
 from swarmpose.publish.zenoh_options import add_zenoh_options  # noqa: F401 (the client's tools take them from here)
 
 QUEUE_SIZE = 256
+END_GRACE_S = 1.0
+"""After every worker has ended, frames are still taken until none has come for this long: zenoh
+does not order a liveliness token's end after the data its worker published before it."""
 _WORKERS_ENDED: dict = {"schema": "swarmpose.client.workers-ended"}
 """Queued after the last live worker's liveliness token went away (ends ``frames(until_workers_end=True)``)."""
 
@@ -130,16 +133,19 @@ class Client:
                until_workers_end: bool = False) -> Iterator[dict]:
         """Frame messages as they arrive; stops after ``count`` frames, when none came for
         ``timeout`` seconds (None: wait forever), or, with ``until_workers_end``, once every
-        worker the client had seen has ended (the frames they sent before are delivered first)."""
-        got = 0
+        worker the client had seen has ended and no frame has come for :data:`END_GRACE_S` (the
+        frames they sent before their end, which may arrive after it, are delivered first)."""
+        got, ended = 0, False
         while count is None or got < count:
             try:
-                message = self._frames.get(timeout=timeout)
+                message = self._frames.get(timeout=END_GRACE_S if ended else timeout)
             except queue.Empty:
+                if ended and not self.workers_ended:  # a worker came back meanwhile: wait as asked
+                    ended = False
+                    continue
                 return
             if message is _WORKERS_ENDED:
-                if until_workers_end and self.workers_ended:
-                    return
+                ended = until_workers_end and self.workers_ended
                 continue
             got += 1
             yield message
