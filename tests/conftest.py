@@ -70,6 +70,15 @@ def surface_distance(vertices: np.ndarray, triangles: np.ndarray, points: np.nda
 
 
 @pytest.fixture(scope="session")
+def makehuman_male():
+    """The MakeHuman body, male preset (skips where the shared assets are absent)."""
+    if not MAKEHUMAN.is_dir():
+        pytest.skip(f"MakeHuman assets not found at {MAKEHUMAN}")
+    from swarmpose.body.makehuman import load_makehuman
+    return load_makehuman(str(MAKEHUMAN), "male")
+
+
+@pytest.fixture(scope="session")
 def wave_sequence(tmp_path_factory) -> Path:
     """A 6-frame synthetic sequence (built-in body waving, 30 fps) with ground truth."""
     from swarmpose.cli.main import main

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import MAKEHUMAN, MOCAP, needs_assets
+from conftest import MOCAP, needs_assets
 
 from swarmpose.core.errors import MotionError
 from swarmpose.motion.bvh import read_bvh
@@ -67,17 +67,10 @@ def toml_map(path: Path, names: dict[str, str], extra: str = "") -> Path:
     return path
 
 
-@pytest.fixture(scope="module")
-def body():
-    if not MAKEHUMAN.is_dir():
-        pytest.skip(f"MakeHuman assets not found at {MAKEHUMAN}")
-    from swarmpose.body.makehuman import load_makehuman
-    return load_makehuman(str(MAKEHUMAN), "male")
-
-
 @needs_assets
 @pytest.mark.parametrize(("clip", "names"), [(DAZ[1], DAZ_NAMES), (ASF, ASF_NAMES)], ids=["daz", "asf"])
-def test_a_renamed_clip_read_through_a_map_file_retargets_as_the_original(tmp_path, body, clip, names):
+def test_a_renamed_clip_read_through_a_map_file_retargets_as_the_original(tmp_path, makehuman_male, clip, names):
+    body = makehuman_male
     original = first_frames(MOCAP / f"{clip}.bvh", tmp_path / "original.bvh", 240)
     joints = read_bvh(original).joint_names
     rename = {name: f"bone_{k:02d}" for k, name in enumerate(joints)}  # nothing a family would recognise

@@ -116,14 +116,6 @@ NEW_FAMILY_CLIPS = ["cmu_02_06_bend_scoop_pickup", "cmu_06_10_dribble_walk_left_
                     "cmu_10_01_soccer_kick", "cmu_14_31_sit_stepstool_standup", "cmu_135_04_front_kick"]
 
 
-@pytest.fixture(scope="module")
-def makehuman_male():
-    if not MAKEHUMAN.is_dir():
-        pytest.skip(f"MakeHuman assets not found at {MAKEHUMAN}")
-    from swarmpose.body.makehuman import load_makehuman
-    return load_makehuman(str(MAKEHUMAN), "male")
-
-
 @needs_assets
 @pytest.mark.parametrize("clip", [
     pytest.param(c, marks=pytest.mark.xfail(strict=True, reason="a deep crouch puts the body's foot 7 cm below "

@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from swarmpose.body.kinematics import forward_kinematics, transform_points
+from swarmpose.body.kinematics import transform_points
 from swarmpose.body.skeleton import EVAL_JOINTS, JOINT_INDEX
 
 if TYPE_CHECKING:  # the message builder imports this module; the command line's parser must not load scipy
@@ -160,15 +160,15 @@ def rig_joints(body: SkinnedBody) -> RigJoints:
     return RigJoints(np.asarray(bones, dtype=np.int64), np.asarray(rest, dtype=np.float64))
 
 
-def posed_joints(body: SkinnedBody, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def posed_joints(body: SkinnedBody, h: np.ndarray,
+                 transforms: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The full set posed: positions (P, K, 3) m and orientations (P, K, 3, 3) (each joint's frame,
-    columns its axes) in the poses' frame, for poses ``h`` (P, 36) or (36,) (then P = 1)."""
+    columns its axes) in the poses' frame, for poses ``h`` (P, 36) or (36,) (then P = 1);
+    ``transforms``: their bone transforms (P, B, 3, 4) where the caller has them (``body.transforms(h)``)."""
     on_rig = rig_joints(body)
-    rot, heads = forward_kinematics(body.rig, np.atleast_2d(h))
-    frames = rot[:, on_rig.bones] @ body.rig.rest_frames[on_rig.bones]  # D_b R_b = W_b
-    trans = heads - np.einsum("pbij,bj->pbi", rot, body.rig.heads)
-    positions = transform_points(on_rig.bones, on_rig.rest, np.concatenate([rot, trans[..., None]], axis=-1))
-    return positions, frames
+    transforms = body.transforms(h) if transforms is None else transforms
+    frames = transforms[:, on_rig.bones, :, :3] @ body.rig.rest_frames[on_rig.bones]  # D_b R_b = W_b
+    return transform_points(on_rig.bones, on_rig.rest, transforms), frames
 
 
 def skeleton_confidence(eval_confidence: np.ndarray) -> np.ndarray:

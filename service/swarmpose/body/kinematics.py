@@ -75,6 +75,16 @@ def matrix_to_quaternion(m: np.ndarray) -> np.ndarray:
     return np.where(q[..., :1] < 0, -q, q)
 
 
+def to_xyzw(q: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) ``[w, x, y, z]`` (this module's order) as ``[x, y, z, w]`` (the messages' and ROS's)."""
+    return np.roll(np.asarray(q, dtype=np.float64), -1, axis=-1)
+
+
+def to_wxyz(q: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) ``[x, y, z, w]`` as ``[w, x, y, z]``."""
+    return np.roll(np.asarray(q, dtype=np.float64), 1, axis=-1)
+
+
 def quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product of quaternions (..., 4) wxyz, broadcasting."""
     aw, ax, ay, az = np.moveaxis(np.asarray(a, dtype=np.float64), -1, 0)

@@ -179,8 +179,13 @@ class SkinnedBody:
 
     def posed_points(self, h: np.ndarray, names=None) -> np.ndarray:
         """Named points (P, N, 3) in the camera frame; ``names`` defaults to all point_names."""
+        return self.points_at(self.transforms(h), names)
+
+    def points_at(self, transforms: np.ndarray, names=None) -> np.ndarray:
+        """Named points (P, N, 3) under bone ``transforms`` (P, B, 3, 4) (:meth:`transforms`, for a
+        caller that needs them for more than the points); ``names`` defaults to all point_names."""
         idx = np.arange(len(self.point_names)) if names is None else self.point_indices(names)
-        return transform_points(self.point_bones[idx], self.point_rest[idx], self.transforms(h))
+        return transform_points(self.point_bones[idx], self.point_rest[idx], transforms)
 
     # ------------------------------------------------------------------ variants
     def tracking_lod(self, triangles: int = 1500) -> SkinnedBody:

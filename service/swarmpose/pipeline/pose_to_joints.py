@@ -33,6 +33,7 @@ def body_at_joints(body: BodyResult, skinned: SkinnedBody, intrinsics: Intrinsic
     targets = found + joints - body.joints3d
     pose = (fit_pose_to_points(skinned, start, EVAL_JOINTS, targets)
             if np.all(np.isfinite(targets)) else np.asarray(start, dtype=np.float64))
-    joints3d = body.joints3d + skinned.posed_points(pose[None], EVAL_JOINTS)[0] - found
+    transforms = skinned.transforms(pose[None])
+    joints3d = body.joints3d + skinned.points_at(transforms, EVAL_JOINTS)[0] - found
     return replace(body, pose=pose, joints3d=joints3d, joints2d=intrinsics.project(joints3d),
-                   unfiltered=body.found, skeleton=posed_skeleton(skinned, pose, intrinsics))
+                   unfiltered=body.found, skeleton=posed_skeleton(skinned, pose, intrinsics, transforms))

@@ -32,11 +32,11 @@ from pathlib import Path
 import numpy as np
 
 from swarmpose.body.joint_set import SKELETON_NAMES, SKELETON_PARENTS
-from swarmpose.body.kinematics import matrix_to_quaternion
+from swarmpose.body.kinematics import matrix_to_quaternion, to_xyzw
 from swarmpose.core.errors import OutputError
 from swarmpose.publish.file_sink import ClosingSink, write_error
 from swarmpose.publish.overlay import id_color
-from swarmpose.publish.ros_skeleton import body_joints, link_points, parent_relative, to_xyzw
+from swarmpose.publish.ros_skeleton import body_joints, link_points, parent_relative
 from swarmpose.sources.base import Frame
 
 log = logging.getLogger(__name__)

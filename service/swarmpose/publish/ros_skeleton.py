@@ -16,18 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmpose.body.joint_set import SKELETON_LINKS, SKELETON_NAMES, SKELETON_PARENTS
-from swarmpose.body.kinematics import quaternion_multiply, quaternion_to_matrix
-
-
-def to_wxyz(q: np.ndarray) -> np.ndarray:
-    """Quaternions (..., 4) ``[x, y, z, w]`` (ROS) as ``[w, x, y, z]`` (:mod:`swarmpose.body.kinematics`)."""
-    return np.roll(np.asarray(q, dtype=np.float64), 1, axis=-1)
-
-
-def to_xyzw(q: np.ndarray) -> np.ndarray:
-    """Quaternions (..., 4) ``[w, x, y, z]`` as ``[x, y, z, w]``."""
-    return np.roll(np.asarray(q, dtype=np.float64), -1, axis=-1)
+from swarmpose.body.joint_set import SKELETON_INDEX, SKELETON_LINKS, SKELETON_NAMES, SKELETON_PARENTS
+from swarmpose.body.kinematics import quaternion_multiply, quaternion_to_matrix, to_wxyz, to_xyzw
 
 
 def body_joints(body: dict) -> tuple[np.ndarray, np.ndarray] | None:
@@ -69,9 +59,8 @@ def parent_relative(positions: np.ndarray, orientations: np.ndarray) -> tuple[np
 def link_points(positions: np.ndarray) -> np.ndarray:
     """The skeleton's lines as point pairs (2 L, 3) m, parent then child per link of
     :data:`SKELETON_LINKS` (a ``LINE_LIST``), from joint positions (K, 3)."""
-    index = {name: k for k, name in enumerate(SKELETON_NAMES)}
-    pairs = [k for parent, child in SKELETON_LINKS for k in (index[parent], index[child])]
+    pairs = [k for parent, child in SKELETON_LINKS for k in (SKELETON_INDEX[parent], SKELETON_INDEX[child])]
     return np.asarray(positions, dtype=np.float64)[pairs]
 
 
-__all__ = ["body_joints", "link_points", "parent_relative", "to_wxyz", "to_xyzw"]
+__all__ = ["body_joints", "link_points", "parent_relative"]

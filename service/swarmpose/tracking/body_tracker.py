@@ -270,7 +270,8 @@ class BodyTracker:
             self.age = 0 if self.previous is None else self.age + 1
             self.previous = best
             self.history.add(best, frame.timestamp_ns)
-        joints3d = self.body.posed_points(best[None], EVAL_JOINTS)[0]
+        transforms = self.body.transforms(best[None])  # the joints' and the full set's (one forward kinematics)
+        joints3d = self.body.points_at(transforms, EVAL_JOINTS)[0]
         joints2d = self.intrinsics.project(joints3d)
         conf = verdict.confidence(self.objective, tile, joints2d, joints, targets, self.config.min_score)
         timings["verdict"] = 1000 * (time.perf_counter() - t_verdict)
@@ -278,7 +279,7 @@ class BodyTracker:
         if state == "tracking":
             self.costs.record(timings["pso"] + timings["polish"], scored, timings["total"])
         out = BodyResult(self.body_id, out_state, reason, best, joints3d, joints2d, conf, parts, timings, joints,
-                         skeleton=posed_skeleton(self.body, best, self.intrinsics))
+                         skeleton=posed_skeleton(self.body, best, self.intrinsics, transforms))
         if self.filter is None or out_state == "lost":
             return out
         return self._filtered(out, frame.timestamp_ns * 1e-9)
@@ -344,9 +345,10 @@ class BodyTracker:
         """``result`` with its pose through :attr:`filter` and the joints of that pose; the search's own
         result stays in ``unfiltered`` (the next frame's start, the detector's box, association)."""
         pose = self.filter(result.pose, time_s)
-        joints3d = self.body.posed_points(pose[None], EVAL_JOINTS)[0]
+        transforms = self.body.transforms(pose[None])
+        joints3d = self.body.points_at(transforms, EVAL_JOINTS)[0]
         return replace(result, pose=pose, joints3d=joints3d, joints2d=self.intrinsics.project(joints3d),
-                       unfiltered=result, skeleton=posed_skeleton(self.body, pose, self.intrinsics))
+                       unfiltered=result, skeleton=posed_skeleton(self.body, pose, self.intrinsics, transforms))
 
     def _lost(self, reason: str, t0: float, joints: Joints2D | None = None) -> BodyResult:
         self.reset()

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from swarmpose.body.joint_set import SKELETON_NAMES, posed_joints
-from swarmpose.body.kinematics import matrix_to_quaternion
+from swarmpose.body.kinematics import matrix_to_quaternion, to_xyzw
 from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
@@ -36,11 +36,6 @@ class Joint:
     orientation_xyzw: np.ndarray | None = None
 
 
-def xyzw(frames: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) as unit quaternions (..., 4) ``[x, y, z, w]`` with w >= 0."""
-    return matrix_to_quaternion(frames)[..., [1, 2, 3, 0]]
-
-
 @dataclass(frozen=True)
 class PosedSkeleton:
     """The full joint set (:data:`~swarmpose.body.joint_set.SKELETON_NAMES`, K = 28) of a posed
@@ -52,9 +47,11 @@ class PosedSkeleton:
     pixels: np.ndarray
 
 
-def posed_skeleton(body: SkinnedBody, pose: np.ndarray, intrinsics: Intrinsics) -> PosedSkeleton:
-    """The full joint set of ``body`` at ``pose`` (36,), camera frame, projected with ``intrinsics``."""
-    positions, frames = posed_joints(body, pose)
+def posed_skeleton(body: SkinnedBody, pose: np.ndarray, intrinsics: Intrinsics,
+                   transforms: np.ndarray | None = None) -> PosedSkeleton:
+    """The full joint set of ``body`` at ``pose`` (36,), camera frame, projected with ``intrinsics``;
+    ``transforms`` (1, B, 3, 4): the pose's bone transforms where the caller has them."""
+    positions, frames = posed_joints(body, pose, transforms)
     return PosedSkeleton(positions[0], frames[0], intrinsics.project(positions[0]))
 
 
@@ -112,7 +109,7 @@ class BodyResult:
         if camera_to_world is not None:
             positions = transform_points(camera_to_world, positions)
             frames = np.asarray(camera_to_world)[:3, :3] @ frames
-        return positions, self.skeleton.pixels, xyzw(frames)
+        return positions, self.skeleton.pixels, to_xyzw(matrix_to_quaternion(frames))
 
     def joints_box(self) -> np.ndarray | None:
         """(4,) [u0, v0, u1, v1] px around the finite 2D joints (where to detect next), or None."""
