@@ -6,7 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
-from swarmpose.bench.matrix import DETECTORS, MODES, SUBSETS
+from swarmpose.bench.hard_motions import HARD_MOTIONS
+from swarmpose.bench.matrix import DETECTORS, MODES, MOTIONS, SUBSETS
 from swarmpose.bench.store import BENCH_SETTINGS
 from swarmpose.bench.utdmhad_names import ACTIONS, SHAPES, SUBJECTS
 from swarmpose.cli.common import DEFAULTS, add_body_options, non_negative_float, positive_int, quiet
@@ -85,15 +86,15 @@ def _names(allowed: tuple[str, ...]):
 def cmd_bench_accuracy(args: argparse.Namespace) -> int:
     """The tracker over the benchmark matrix: per cell and mode Δ, A(100), lost frames, facing."""
     from swarmpose.bench.accuracy import mean_over_seeds, run_matrix
-    from swarmpose.bench.accuracy_report import format_summary, format_table, plot_heatmap
+    from swarmpose.bench.accuracy_report import format_goals, format_summary, format_table, plot_heatmap
 
     tracker = {**_tracker_settings(args), "max_people": args.max_people}
     records = run_matrix(Path(args.out), subset=args.subset, detectors=args.detectors, modes=args.modes,
                          frames=args.frames, tracker=tracker, assets=args.assets, progress=not quiet(args),
-                         seeds=args.seeds)
+                         seeds=args.seeds, motions=args.motions)
     out = Path(args.out)
     merged = mean_over_seeds(records) if args.seeds > 1 else records
-    table = "\n\n".join([format_summary(merged), format_table(merged)]) + "\n"
+    table = "\n\n".join([format_summary(merged), format_table(merged), format_goals(merged)]) + "\n"
     (out / "table.md").write_text(table)
     (out / "records.json").write_text(json.dumps(records, indent=1))
     plot_heatmap(merged, out / "heatmap.png")
@@ -209,11 +210,16 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
     p.add_argument("--out", required=True, help="folder of the sequences, the per-cell results, table and heat map; "
                                                 "run again to resume")
     p.add_argument("--subset", choices=SUBSETS, default="full",
-                   help="full: 15 sequences x 3 detectors; regression: walk from the side and behind, MoveNet")
+                   help="full: 15 sequences x 3 detectors; regression: walk from the side and behind, MoveNet; "
+                        "hard: 6 hard motions x 5 views x MoveNet and BlazePose; hard-regression: the turning "
+                        "walk from the front, MoveNet")
     p.add_argument("--detectors", type=_names(tuple(DETECTORS)), default=None,
                    help=f"comma-separated subset of {', '.join(DETECTORS)} (default: the subset's)")
+    p.add_argument("--motions", type=_names((*MOTIONS, *HARD_MOTIONS)), default=None,
+                   help="comma-separated motions of the subset to run (default: all of them)")
     p.add_argument("--modes", type=_names(MODES), default=",".join(MODES), help="comma-separated tracker modes")
-    p.add_argument("--frames", type=positive_int, default=40, help="frames per sequence")
+    p.add_argument("--frames", type=positive_int, default=40,
+                   help="frames per sequence (a hard motion: the first N of its segment, at most all of it)")
     p.add_argument("--max-people", type=positive_int, default=1,
                    help="people tracked per frame (> 1: segmentation and a detection per person)")
     p.add_argument("--seeds", type=positive_int, default=1,
