@@ -15,8 +15,8 @@ sit-stand      ``cmu_14_31_sit_stepstool_standup.bvh``          1.2–8.0    bac
 run            ``cmu_09_01_run.bvh``                            0.1–0.6    running at 3.6 m/s (1.8 m; the clip is 1.2 s)
 pick-up        ``cmu_02_06_bend_scoop_pickup.bvh``              0.5–2.1    bends to the floor, scoops with the right
                                                                            hand, straightens up
-soccer-kick    ``cmu_10_01_soccer_kick.bvh``                    4.3–5.6    two run-up strides, a right-foot kick
-                                                                           (the foot 0.5 m up), landing
+soccer-kick    ``cmu_10_01_soccer_kick.bvh``                    4.3–5.6    the last run-up strides and the kick: the
+                                                                           right foot swings up to 0.5 m twice
 front-kick     ``cmu_135_04_front_kick.bvh``                    2.6–3.8    a right front kick (the foot 1.3 m up),
                                                                            landing a step forward
 =============  ==============================================  =========  ==========================================
