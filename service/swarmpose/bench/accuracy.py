@@ -198,8 +198,8 @@ def track_cell(cell: Cell, mode: str, folder: Path, assets: Path, tracker: dict,
     config = ServiceConfig(source=str(folder), detector=spec, body=f"makehuman:{assets}/bodies/makehuman",
                            shape=cell.sequence.shape, tracker=TrackerConfig(mode=mode, **tracker), overlay=False)
     run = track_with_truth(config, frames)
-    return {"cell": cell.name, "mode": mode, **asdict(cell.sequence), "detector": cell.detector,
-            **scores(run), **tracker}
+    return {"cell": cell.name, "mode": mode, **asdict(cell.sequence), "props": list(cell.sequence.props),
+            "detector": cell.detector, **scores(run), **tracker}
 
 
 def run_matrix(out: Path, *, subset: str = "full", detectors: tuple[str, ...] | None = None,
