@@ -51,6 +51,18 @@ def test_a_track_with_jitter_lags_as_much_as_without():
     assert motion_lag_ms(track, truth, 30, FPS, still_from=5) == pytest.approx(50.0, abs=8.0)
 
 
+def test_a_joint_that_jumps_does_not_move_the_lag_and_a_joint_that_stays_has_none():
+    truth = _still_then_moving(60, 30, 0.0)
+    track = _still_then_moving(60, 30, 0.05)
+    truth, track = np.concatenate([truth, truth[:, 1:] * [1, -1, 1]], axis=1), np.concatenate(
+        [track, track[:, 1:] * [1, -1, 1]], axis=1)  # joints 1 and 2 move (mirrored), joint 0 stays
+    truth, track = np.concatenate([truth, truth[:, 1:2]], axis=1), np.concatenate([track, track[:, 1:2]], axis=1)
+    track[36:41, 3] += [0.0, 0.2, 0.0]  # joint 3, a hidden limb, jumps 20 cm for 5 frames of the window
+    assert motion_lag_ms(track, truth, 30, FPS, still_from=5) == pytest.approx(50.0, abs=2.0)
+    still = np.repeat(truth[:1], 60, axis=0)  # nothing moves: no lag to measure
+    assert np.isnan(motion_lag_ms(still, still, 30, FPS))
+
+
 def test_the_report_of_a_track_offset_by_a_constant():
     truth = _still_then_moving(60, 30, 0.0)
     track = truth + [0.0, 0.006, 0.008]  # 10 mm off everywhere, no jitter, no lag

@@ -13,12 +13,13 @@ smoothed pose back). Per (sequence, detector, smoothing), by :func:`swarmpose.si
   the still frames, the first ``settle_s`` (the track's start) left out; mean and max over the
   joints, and the joint of the max;
 * ``still_delta_mm``: Δ over those frames;
-* ``lag_ms``: the shift that best lines the track's displacement up with the truth's over the
-  first 0.5 s of motion (> 0: behind);
+* ``lag_ms``: the median over the joints that move of the shift that best lines each one's
+  tracked displacement up with the truth's over the first 0.5 s of motion (> 0: behind);
 * ``onset_delta_mm`` / ``moving_delta_mm``: Δ over the first 0.3 s of motion / the rest of it.
 
-Each (sequence, detector) is one JSON record in ``OUT/results/``, written when done: an
-interrupted run resumes, and a record made with other settings is made again.
+Each (sequence, detector) is one JSON record in ``OUT/results/``, written when done, beside its
+joints (``.npz``: the truth and each smoothing's joints, for another look): an interrupted run
+resumes, and a record made with other settings is made again.
 """
 
 from __future__ import annotations
@@ -84,15 +85,20 @@ def _rows(plan: StillPlan, runs: dict[str, TrackedRun]) -> list[dict]:
     return rows
 
 
-def track_still(plan: StillPlan, folder: Path, detector: str, shape: str, settings: dict, root: Path | None) -> dict:
+def track_still(plan: StillPlan, folder: Path, detector: str, shape: str, settings: dict, root: Path | None,
+                joints_file: Path | None = None) -> dict:
     """The record of one sequence and detector: its rows (one per smoothing), the runs' fps and how far
-    apart their unsmoothed joints are (mm)."""
+    apart their unsmoothed joints are (mm). joints_file: where to keep the truth and each smoothing's
+    joints (F, J, 3) m (``.npz``, keys ``truth``, ``off``, ``one-euro``, ``centred``), or None."""
     spec = DETECTORS[detector].format(assets=root)
     runs = {}
     for smoothing in RUNS:
         config = ServiceConfig(source=str(folder), detector=spec, body=body_spec(plan, root), shape=shape,
                                tracker=TrackerConfig(**settings, smoothing=smoothing), overlay=False)
         runs[smoothing] = track_with_truth(config, plan.frames)
+    if joints_file is not None:
+        np.savez_compressed(joints_file, truth=runs[RUNS[0]].truth, off=runs[RUNS[0]].unsmoothed,
+                            **{name: run.estimates for name, run in runs.items()})
     a, b = (runs[r].unsmoothed for r in RUNS)
     gap = np.linalg.norm(a - b, axis=2)
     return {"rows": _rows(plan, runs), "fps": [runs[r].summary.fps for r in RUNS],
@@ -121,7 +127,7 @@ def run_still(out: Path, plan: StillPlan | None = None, tracker: dict | None = N
             if record is None:
                 folder = make_still_sequence(plan, shape, yaw, out / "sequences" / name, root)
                 record = {**expected, "sequence": name, "shape": shape, "yaw": yaw, "detector": detector,
-                          **track_still(plan, folder, detector, shape, settings, root)}
+                          **track_still(plan, folder, detector, shape, settings, root, path.with_suffix(".npz"))}
                 write_record(path, record)
             cell = {k: record[k] for k in ("sequence", "shape", "yaw", "detector", "off_agree_mm")}
             rows += [{**cell, **row} for row in record["rows"]]

@@ -13,15 +13,16 @@ as the new boxes stay within ``share`` of it; the first box past it is given as 
 the new anchor. A moving person's box leaves the share within a frame or two and is never held
 (holding a walker's box lagging a few pixels behind cost a side view's walk 1-13 mm over 2 seeds
 at shares 0.01-0.05 when the hold began at once), and the crop square is 1.25 times the box's
-larger side, so a held box still frames the person.
+larger side, so a held box still frames the person. Opt-in (``--box-hold 0.02``; 0, the default,
+gives the joints box every frame): on a fragile moving cell (jumping jacks from behind, MoveNet)
+the run's path changes with the crop, and 5 of 12 seeds fell into the mirrored facing with the
+hold against 3 of 12 without (BENCHMARKS.md, issue 53).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-BOX_HOLD_SHARE = 0.02
-"""The default share (of the box's larger side) an edge may move while the box is held."""
 STILL_FRAMES = 5
 """Frames a box must stay within the share of its anchor before the anchor is held."""
 
@@ -30,7 +31,7 @@ class SteadyBoxes:
     """The crop box of each track id ([x0, y0, x1, y1] px), held once still (module doc); ``share`` 0:
     every box as given."""
 
-    def __init__(self, share: float = BOX_HOLD_SHARE, still_frames: int = STILL_FRAMES):
+    def __init__(self, share: float, still_frames: int = STILL_FRAMES):
         if not (np.isfinite(share) and share >= 0) or still_frames < 0:
             raise ValueError(f"a box hold share of {share} after {still_frames} frames; both must be >= 0")
         self.share, self.still_frames = float(share), int(still_frames)
