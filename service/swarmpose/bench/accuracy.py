@@ -139,8 +139,9 @@ class TrackedRun:
     """One source tracked against its ground truth: estimates and truth (F, J, 3) m in
     ``EVAL_JOINTS`` order (NaN rows where the body was lost), the detections (Joints2D or
     None per frame), lost frames, the run's summary, the camera and every frame's timings
-    (ms, the frame message's ``timings_ms``), the published poses (F, 36) (NaN rows: lost) and the
-    frames' capture times (F,) s."""
+    (ms, the frame message's ``timings_ms``), the published poses (F, 36) (NaN rows: lost), the
+    frames' capture times (F,) s and the joints as the search found them before any smoothing
+    (F, J, 3) m (the estimates themselves when nothing is smoothed)."""
 
     estimates: np.ndarray
     truth: np.ndarray
@@ -151,12 +152,13 @@ class TrackedRun:
     timings: list[dict[str, float]]
     poses: np.ndarray
     times_s: np.ndarray
+    unsmoothed: np.ndarray
 
 
 def track_with_truth(config: ServiceConfig, frames: int = 0) -> TrackedRun:
     """Track ``config``'s source (its first ``frames``; 0 = all) and collect estimates beside its ground truth."""
     summary = RunSummary()
-    estimates, detections, timings, done, poses, times, lost = [], [], [], [], [], [], 0
+    estimates, detections, timings, done, poses, times, unsmoothed, lost = [], [], [], [], [], [], [], 0
     with ExitStack() as stack:
         parts = open_parts(config, stack, score=False, need_ground_truth=True)
         truth_of = parts.source.ground_truth
@@ -166,6 +168,7 @@ def track_with_truth(config: ServiceConfig, frames: int = 0) -> TrackedRun:
             found = body is not None and body.state != "lost"
             lost += not found
             estimates.append(body.joints3d if found else np.full((len(EVAL_JOINTS), 3), np.nan))
+            unsmoothed.append(body.found.joints3d if found else np.full((len(EVAL_JOINTS), 3), np.nan))
             poses.append(body.pose if found and body.pose is not None else np.full(POSE_DIM, np.nan))
             times.append(result.timestamp_ns * 1e-9)
             detections.append(body.detection if body is not None else None)
@@ -174,7 +177,7 @@ def track_with_truth(config: ServiceConfig, frames: int = 0) -> TrackedRun:
     truth = truth_of.joints3d[[truth_of.row(f) for f in done]]
     return TrackedRun(np.asarray(estimates, float).reshape(-1, len(EVAL_JOINTS), 3), truth, detections, lost,
                       summary, intrinsics, timings, np.asarray(poses, float).reshape(-1, POSE_DIM),
-                      np.asarray(times, float))
+                      np.asarray(times, float), np.asarray(unsmoothed, float).reshape(-1, len(EVAL_JOINTS), 3))
 
 
 def scores(run: TrackedRun) -> dict:
