@@ -20,7 +20,8 @@ def record(motion: str, detector: str, mode: str, delta: float | None, **extra) 
 
 
 RECORDS = [
-    record("run", "movenet", "hybrid", 40.0, **NO_FLIP), record("run", "movenet", "joints", 80.0, **NO_FLIP),
+    record("run", "movenet", "hybrid", 40.0, visible_mm=30.0, hidden_mm=70.0, hidden_share=0.25, **NO_FLIP),
+    record("run", "movenet", "joints", 80.0, **NO_FLIP),
     record("run", "blazepose", "hybrid", 60.0, flipped=5, sides_swapped=4, flips=1, recovery_mean_s=1 / 6,
            recovery_max_s=1 / 6, unrecovered=0),
     record("run", "blazepose", "joints", 70.0, **NO_FLIP),
@@ -49,6 +50,18 @@ def test_the_table_shows_flipped_and_swapped_frames_and_the_recovery():
     assert "| 100 % | 3 | 3 | 0.20 / 0.30+ | 4 |" in rows["| pick-upmovenet"], "the last flip lasted to the end"
     assert "| 100 % | – | – | – | 4 |" in rows["| walkmovenet"], "a record from before the flip metrics"
     assert "'+': a flip still on at the last frame" in format_table(RECORDS)
+
+
+def test_the_table_splits_the_hybrid_error_into_visible_and_hidden_joints():
+    rows = {line.split(" | ")[0] + line.split(" | ")[4]: line for line in format_table(RECORDS).splitlines()
+            if line.startswith("| ") and " | 90° | " in line}
+    assert "| 0.50 | 30 / 70 (25 % hidden) | 90 % |" in rows["| runmovenet"]
+    assert "| – / – | 90 % |" in rows["| walkmovenet"], "a record from before the split"
+    merged = mean_over_seeds([record("run", "movenet", "hybrid", 40.0, visible_mm=30.0, hidden_mm=70.0,
+                                     hidden_share=0.2),
+                              record("run", "movenet", "hybrid", 50.0, seed=1, visible_mm=40.0, hidden_mm=90.0,
+                                     hidden_share=0.3)])[0]
+    assert (merged["visible_mm"], merged["hidden_mm"], merged["hidden_share"]) == pytest.approx((35.0, 80.0, 0.25))
 
 
 def test_flips_over_seeds_average_the_counts_and_keep_the_longest_recovery():

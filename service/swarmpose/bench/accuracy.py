@@ -15,6 +15,8 @@ with the subject's own shape, and score it against the ground truth:
   estimate's left/right torso joints fit the truth better exchanged), ``flips`` and their
   ``recovery_mean_s`` / ``recovery_max_s`` (to the first right frame; ``unrecovered`` 1 when the
   last flip lasted to the end), see :mod:`.flip_metrics`,
+* ``visible_mm`` and ``hidden_mm``: Δ over the joints the depth shows and over those it hides
+  (self-occlusion, another person, a prop), and ``hidden_share`` (see :mod:`swarmpose.sim.visibility`),
 * ``fps`` of detection + tracking.
 
 Each (cell, mode) is one JSON file in ``OUT/results/``, written when it is done: an
@@ -54,6 +56,8 @@ from swarmpose.pipeline.service import open_parts
 from swarmpose.sim.evaluate import facing_errors_deg, joint_errors, summarise
 from swarmpose.sim.scene import PersonSpec, load_people
 from swarmpose.sim.synth import SynthConfig, synthesize, synthesize_people
+from swarmpose.sim.visibility import hidden_joints, split_errors_mm
+from swarmpose.sources.base import Frame
 from swarmpose.tracking.config import TrackerConfig
 
 log = logging.getLogger(__name__)
@@ -141,7 +145,8 @@ class TrackedRun:
     None per frame), lost frames, the run's summary, the camera and every frame's timings
     (ms, the frame message's ``timings_ms``), the published poses (F, 36) (NaN rows: lost), the
     frames' capture times (F,) s and the joints as the search found them before any smoothing
-    (F, J, 3) m (the estimates themselves when nothing is smoothed)."""
+    (F, J, 3) m (the estimates themselves when nothing is smoothed), and which true joints the
+    depth hides (F, J) bool (:func:`~swarmpose.sim.visibility.hidden_joints`)."""
 
     estimates: np.ndarray
     truth: np.ndarray
@@ -153,6 +158,19 @@ class TrackedRun:
     poses: np.ndarray
     times_s: np.ndarray
     unsmoothed: np.ndarray
+    hidden: np.ndarray | None = None
+
+
+def _seen(source, truth_of, hidden: dict[int, np.ndarray]):
+    """``source``'s items unchanged; each frame's hidden true joints noted in ``hidden`` (index -> (J,) bool)."""
+    for item in source:
+        if isinstance(item, Frame):
+            try:
+                joints = truth_of.joints3d[truth_of.row(item.index)]
+            except KeyError:  # a frame without truth: no joint to judge
+                joints = np.full((len(EVAL_JOINTS), 3), np.nan)
+            hidden[item.index] = hidden_joints(item.depth, item.intrinsics, joints)
+        yield item
 
 
 def track_with_truth(config: ServiceConfig, frames: int = 0) -> TrackedRun:
@@ -163,7 +181,8 @@ def track_with_truth(config: ServiceConfig, frames: int = 0) -> TrackedRun:
         parts = open_parts(config, stack, score=False, need_ground_truth=True)
         truth_of = parts.source.ground_truth
         intrinsics = parts.source.intrinsics
-        for result in results(parts.source, parts.pipeline, frames, summary):
+        hidden: dict[int, np.ndarray] = {}
+        for result in results(_seen(parts.source, truth_of, hidden), parts.pipeline, frames, summary):
             body = result.bodies[0] if result.bodies else None
             found = body is not None and body.state != "lost"
             lost += not found
@@ -177,7 +196,9 @@ def track_with_truth(config: ServiceConfig, frames: int = 0) -> TrackedRun:
     truth = truth_of.joints3d[[truth_of.row(f) for f in done]]
     return TrackedRun(np.asarray(estimates, float).reshape(-1, len(EVAL_JOINTS), 3), truth, detections, lost,
                       summary, intrinsics, timings, np.asarray(poses, float).reshape(-1, POSE_DIM),
-                      np.asarray(times, float), np.asarray(unsmoothed, float).reshape(-1, len(EVAL_JOINTS), 3))
+                      np.asarray(times, float), np.asarray(unsmoothed, float).reshape(-1, len(EVAL_JOINTS), 3),
+                      np.asarray([hidden.get(f, np.ones(len(EVAL_JOINTS), bool)) for f in done],
+                                 bool).reshape(-1, len(EVAL_JOINTS)))
 
 
 def scores(run: TrackedRun) -> dict:
@@ -191,7 +212,8 @@ def scores(run: TrackedRun) -> dict:
             "facing_deg": float(np.mean(facing[known])) if known.any() else None,
             "facing_ok": float(np.mean(facing[known] <= FACING_OK_DEG)) if known.any() else 0.0,
             "detector_px": px, "swapped": swapped, "fps": run.summary.fps,
-            **flip_metrics(run.estimates, run.truth, run.times_s)}
+            **flip_metrics(run.estimates, run.truth, run.times_s),
+            **(split_errors_mm(run.estimates, run.truth, run.hidden) if run.hidden is not None else {})}
 
 
 def track_cell(cell: Cell, mode: str, folder: Path, assets: Path, tracker: dict, frames: int = 0) -> dict:
@@ -242,7 +264,8 @@ def run_matrix(out: Path, *, subset: str = "full", detectors: tuple[str, ...] | 
     return records
 
 
-AVERAGED = ("mpjpe_mm", "A100", "lost", "facing_deg", "facing_ok", "fps", "detector_px", "swapped")
+AVERAGED = ("mpjpe_mm", "A100", "lost", "facing_deg", "facing_ok", "fps", "detector_px", "swapped", "visible_mm",
+            "hidden_mm", "hidden_share")
 """The fields of a record :func:`mean_over_seeds` averages (the others are the same for every seed;
 the detector's errors are not: it runs on a crop around the track)."""
 FLIP_COUNTS = ("flipped", "sides_swapped", "flips", "unrecovered")
@@ -251,14 +274,15 @@ FLIP_COUNTS = ("flipped", "sides_swapped", "flips", "unrecovered")
 
 def mean_over_seeds(records: list[dict]) -> list[dict]:
     """One record per (cell, mode): :data:`AVERAGED` fields averaged over its seeds (None where a
-    seed had none), plus ``seeds`` (how many) and ``mpjpe_spread_mm`` (largest minus smallest Δ)."""
+    seed had none; left out where no seed has the field), plus ``seeds`` (how many) and
+    ``mpjpe_spread_mm`` (largest minus smallest Δ)."""
     groups: dict[tuple[str, str], list[dict]] = {}
     for record in records:
         groups.setdefault((record["cell"], record["mode"]), []).append(record)
     merged = []
     for group in groups.values():
         out = {k: v for k, v in group[0].items() if k != "seed"}
-        for key in AVERAGED:
+        for key in (k for k in AVERAGED if any(k in r for r in group)):  # older records lack the newer fields
             values = [r.get(key) for r in group]
             out[key] = None if any(v is None for v in values) else float(np.mean(values))
         if any("flips" in r for r in group):

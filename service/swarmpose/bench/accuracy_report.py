@@ -28,14 +28,16 @@ RECOVERY_NOTE = ("recovery: mean / longest time (s) from a flip's first frame to
 
 
 def format_table(records: list[dict]) -> str:
-    """One Markdown row per cell: Δ (mm) per mode, hybrid/joints, and the hybrid fit's
-    A(100 mm), lost frames, share of frames facing within 30°, flipped and sides-swapped frames
+    """One Markdown row per cell: Δ (mm) per mode, hybrid/joints, and the hybrid fit's Δ over the
+    joints the depth shows and over those it hides (the share hidden), A(100 mm), lost frames,
+    share of frames facing within 30°, flipped and sides-swapped frames
     and the recovery from flips (:data:`RECOVERY_NOTE`), and the detector's 2D error and label
     swaps; records averaged over seeds (``mpjpe_spread_mm``) add the hybrid Δ's spread between seeds."""
     seeded = any("mpjpe_spread_mm" in r for r in records)
     head = ("| motion | shape | yaw | height, distance (m) | detector | " + " | ".join(f"Δ {m}" for m in MODES)
             + (" | hybrid spread over seeds" if seeded else "")
-            + " | hybrid/joints | A100 hybrid | lost hybrid | facing ≤ 30° hybrid | flipped hybrid "
+            + " | hybrid/joints | hybrid visible / hidden joints | A100 hybrid | lost hybrid | facing ≤ 30° hybrid "
+            "| flipped hybrid "
             "| sides swapped hybrid | recovery hybrid (s) | detector px | swapped |")
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for modes in sorted(_cells(records).values(), key=lambda m: _order(next(iter(m.values())))):
@@ -48,11 +50,18 @@ def format_table(records: list[dict]) -> str:
             f"| {r['motion']} | {r['shape']} | {r['yaw_deg']}° | {r['camera_height']:.1f}, {r['camera_distance']:.1f} "
             f"| {r['detector']} | " + " | ".join(_mm(modes.get(m, {}).get("mpjpe_mm")) for m in MODES)
             + (f" | {_mm(hybrid.get('mpjpe_spread_mm'))}" if seeded else "")
-            + f" | {ratio} | {_pct(hybrid.get('A100'))} | {_count(hybrid.get('lost'))} "
+            + f" | {ratio} | {_mm(hybrid.get('visible_mm'))} / {_mm(hybrid.get('hidden_mm'))}"
+            f"{_hidden_share(hybrid)} | {_pct(hybrid.get('A100'))} | {_count(hybrid.get('lost'))} "
             f"| {_pct(hybrid.get('facing_ok'))} | {_count(hybrid.get('flipped'))} "
             f"| {_count(hybrid.get('sides_swapped'))} | {_recovery(hybrid)} "
             f"| {_mm(r.get('detector_px'))} | {swapped} |")
     return "\n".join(lines) + "\n\n" + RECOVERY_NOTE
+
+
+def _hidden_share(record: dict) -> str:
+    """' (N % hidden)' of a record that has the split, else nothing."""
+    share = record.get("hidden_share")
+    return "" if share is None else f" ({100 * share:.0f} % hidden)"
 
 
 def _recovery(record: dict) -> str:

@@ -13,6 +13,8 @@ the ``eval`` defaults unless told otherwise, and score it against the Kinect SDK
   of the two skeletons' different joint definitions (Kinect hips sit higher and wider, its
   shoulders lower) but not errors that change with the pose — the subjects all face the
   camera, so a camera-frame offset is a body-frame offset here;
+* ``visible_mm`` / ``hidden_mm``: Δ over the joints the Kinect's depth shows and over those it
+  hides (:mod:`swarmpose.sim.visibility`; a joint the body itself covers counts as hidden);
 * ``A100``, lost frames, and the detector's median 2D error (px) on the limbs' joints.
 
 Detectors: ``simulated`` (the noise model applied to the projected Kinect skeleton; no face
@@ -234,8 +236,9 @@ def format_table(records: list[dict]) -> str:
 
 
 def summary(records: list[dict]) -> dict[str, dict[str, float | None]]:
-    """Per variant: mean Δ and mean offset-corrected Δ over its records (every seed), sequences,
-    seeds, frames and lost frames (summed over the seeds), detector px."""
+    """Per variant: mean Δ and mean offset-corrected Δ over its records (every seed), Δ over the
+    joints the depth shows and over those it hides (records made before the split left out),
+    sequences, seeds, frames and lost frames (summed over the seeds), detector px."""
     out = {}
     for v in sorted({(r["mode"], r["detector"], r["shape"]) for r in records}):
         rows = [r for r in records if (r["mode"], r["detector"], r["shape"]) == v]
@@ -245,6 +248,7 @@ def summary(records: list[dict]) -> dict[str, dict[str, float | None]]:
             return float(np.mean(values)) if values else None
 
         out[variant_name(*v)] = {"mpjpe_mm": mean("mpjpe_mm"), "mpjpe_offset_mm": mean("mpjpe_offset_mm"),
+                                 "visible_mm": mean("visible_mm"), "hidden_mm": mean("hidden_mm"),
                                  "sequences": len({r["sequence"] for r in rows}),
                                  "seeds": len({r.get("seed", 0) for r in rows}),
                                  "frames": int(sum(r["frames"] for r in rows)),
