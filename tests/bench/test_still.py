@@ -74,3 +74,16 @@ def test_the_report_of_a_tiny_run_matches_its_sequence_tracked_on_its_own(tmp_pa
     # run again: every record is read back
     assert main(["bench", "still", "--out", str(out), *TINY, "--json", "--quiet"]) == 0
     assert json.loads(capsys.readouterr().out)["rows"] == report["rows"]
+
+
+def test_both_tables_have_as_many_cells_in_every_line_as_their_header():
+    from swarmpose.bench.still_report import format_rows, format_summary
+
+    row = {"sequence": "still-front", "detector": "movenet", "smoothing": "off", "jitter_mm": 9.3,
+           "jitter_max_mm": 20.1, "jitter_worst": "left_wrist", "still_delta_mm": 21.0, "lag_ms": 5.0,
+           "onset_delta_mm": 30.2, "moving_delta_mm": None}
+    for table, leading in ((format_summary([row]), 2), (format_rows([row]), 3)):
+        lines = table.splitlines()
+        assert len({line.count("|") for line in lines}) == 1, table
+        assert lines[2].split(" | ")[leading:leading + 2] == ["9.3", "20.1 (left_wrist)"]
+        assert lines[2].endswith("| 30.2 | – |")
