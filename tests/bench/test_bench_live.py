@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from swarmpose.bench.live import LiveLog, Published, accuracy_figures, bench_live, stage_split
+from swarmpose.bench.live import LiveLog, Published, accuracy_figures, bench_live, stage_split, steady_latencies
 from swarmpose.publish.pose_at import HORIZON_S
 from swarmpose.sources.groundtruth import GroundTruth
 
@@ -64,8 +64,24 @@ def test_a_short_live_run_publishes_poses_near_the_truth(side_wave):
     result = bench_live(config, seconds=2.0, offline=True, startup=False)
     assert result["poses"] >= 3 and result["poses_per_s"] > 0
     assert result["latency_ms"]["p95"] >= result["latency_ms"]["median"] > 0
+    assert result["starts"] >= 1, "the track started at least once"
     assert result["live_mm"] < 150 and result["offline_mm"] < 150
     assert result["client_floor_mm"] is not None and result["stage_ms"]["search"] > 0
+
+
+def test_steady_latencies_leave_out_the_second_after_each_start():
+    truth = _truth(40)
+    log = LiveLog()
+    for k in range(40):  # frames every 0.1 s, each 100 ms late; a start at 0.0 s and at 2.0 s
+        p = _published(k, 0.1 * k, 0.1 * k + 0.1, truth)
+        if k in (0, 20):
+            p.timings_ms["init"] = 500.0
+        log.published.append(p)
+    steady, starts = steady_latencies(log, settle_s=1.0)
+    assert starts == 2
+    assert len(steady) == 40 - 2 * 10, "frames 0-9 and 20-29 are within a second of a start"
+    assert steady == pytest.approx([100.0] * 20)
+    assert steady_latencies(LiveLog())[0] == []
 
 
 def test_camera_frames_of_a_new_pass_before_its_first_pose_are_left_out_of_the_client_figures():

@@ -7,6 +7,9 @@ Reported (see :func:`bench_live`):
   ``poses_per_s_per_person``: the true people's estimates per second per person (without ground
   truth: tracked bodies per second);
 * ``latency_ms``: capture-to-publish latency (p50, p95) of the published frames;
+  ``latency_steady_ms``: the same over the frames taken :data:`SETTLE_S` or more after the last
+  frame with a track's start (a start and its first re-checks hold up the frames behind them; a
+  looped recording whose person jumps back restarts the track at every pass), and ``starts``;
 * ``startup_s``: in this process, from opening the parts to the first pose; ``startup_cold_s`` and
   ``startup_warm_s``: a ``swarmpose serve`` process from its start to its first written pose, with
   an empty kernel and body cache, then with the cache that run left;
@@ -59,6 +62,8 @@ STAGES = {
 }
 """Stages of a frame's time: name -> the keys of a frame message's ``timings_ms`` it sums
 (``publish``, the time the sinks took, is measured by the bench itself)."""
+SETTLE_S = 1.0
+"""A frame taken this long after a track's start is a steady frame (``latency_steady_ms``)."""
 MATCH_M = 0.5
 """A body is a true person's estimate when their mean joint distance is within this (several people)."""
 STARTUP_LIMIT_S = 180.0
@@ -130,6 +135,18 @@ class LiveLog:
 
     def close(self) -> None:
         """Nothing to release."""
+
+
+def steady_latencies(log: LiveLog, settle_s: float = SETTLE_S) -> tuple[list[float], int]:
+    """The latencies (ms) of the published frames taken ``settle_s`` or more after the last frame
+    with a track's start (its timings hold ``init``), and how many frames started a track."""
+    last_start_ns, steady, starts = None, [], 0
+    for p in sorted(log.published, key=lambda p: p.received_ns):
+        if p.timings_ms.get("init"):
+            last_start_ns, starts = p.received_ns, starts + 1
+        elif last_start_ns is None or p.received_ns - last_start_ns >= settle_s * 1e9:
+            steady.append(p.latency_ms)
+    return steady, starts
 
 
 def truth_people(ground_truth, index: int) -> list[np.ndarray]:
@@ -308,6 +325,7 @@ def bench_live(config: ServiceConfig, seconds: float = 20.0, offline: bool = Tru
         raise ConfigError(f"--seconds {seconds}: the live run needs a positive length")
     log, startup_s, ground_truth = run_live(config, seconds)
     poses = [p for p in log.published if p.joints]
+    steady, starts = steady_latencies(log)
     span_s = ((log.published[-1].publish_ns - log.first_pose_ns) / 1e9) if poses else 0.0
     people = max((len(truth_people(ground_truth, p.frame)) for p in log.published[:50]), default=1) \
         if ground_truth is not None else 1
@@ -323,6 +341,7 @@ def bench_live(config: ServiceConfig, seconds: float = 20.0, offline: bool = Tru
         "poses_per_s_per_person": round(bodies / span_s / max(people, 1), 2) if span_s > 0 else 0.0,
         "people": people,
         "latency_ms": latency_summary([p.latency_ms for p in log.published]),
+        "latency_steady_ms": latency_summary(steady), "starts": starts,
         "startup_s": None if startup_s is None else round(startup_s, 2),
         "stage_ms": stage_split(log),
         "particles": config.tracker.particles, "generations": config.tracker.generations,
@@ -348,11 +367,13 @@ def format_live_bench(result: dict) -> str:
         value = result.get(key)
         return "–" if value is None else f"{value:.1f} mm"
 
-    lat = result["latency_ms"]
+    lat, steady = result["latency_ms"], result["latency_steady_ms"]
     lines = [f"{result['source']}: {result['published']} frames published of {result['camera_frames']} served in "
              f"{result['seconds']:.1f} s (p = {result['particles']}, g = {result['generations']})",
              f"poses/s {result['poses_per_s']:.2f} ({result['poses_per_s_per_person']:.2f} per person, "
-             f"{result['people']} in view); latency p50 {lat['median']} ms, p95 {lat['p95']} ms",
+             f"{result['people']} in view); latency p50 {lat['median']} ms, p95 {lat['p95']} ms; "
+             f"{result['starts']} track starts, {SETTLE_S:g} s after them p50 {steady['median']} ms, "
+             f"p95 {steady['p95']} ms",
              f"start-up to the first pose: {result['startup_s']} s in this process"
              + (f", a serve process {result['startup_cold_s']} s cold, {result['startup_warm_s']} s warm"
                 if "startup_cold_s" in result else "")]
