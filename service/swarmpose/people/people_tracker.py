@@ -178,12 +178,14 @@ class PeopleTracker:
             return tracker
         return self.make_tracker(body_id)
 
-    def step(self, frame: Frame, people: Sequence[PersonDetection], labels: np.ndarray | None = None
-             ) -> tuple[BodyResult, ...]:
+    def step(self, frame: Frame, people: Sequence[PersonDetection], labels: np.ndarray | None = None,
+             props: np.ndarray | None = None) -> tuple[BodyResult, ...]:
         """The bodies of ``frame``: one per person tracked in it, by id.
 
         people: each person's segment and 2D joints (segment None: one whole-frame detection);
-        labels: (H, W) int the segmentation's person labels (k = ``people[k-1]``), None without.
+        labels: (H, W) int the segmentation's person labels (k = ``people[k-1]``), None without;
+        props: (H, W) bool pixels of props beside people (:mod:`swarmpose.detect.props`), left out
+        of every person's depth, None: none.
         A track whose fit throws restarts (its id stays); the other people go on."""
         centres = [self._centre(p) for p in people]
         looks = [colour_histogram(frame.color, p.segment.mask) if p.segment is not None else None for p in people]
@@ -192,7 +194,8 @@ class PeopleTracker:
         self._last_index = frame.index
         for t, o in assignment.pairs:
             track = self.tracks[t]
-            body = self._fit(track.tracker, frame, self._frame_for(frame, labels, o, people[o]), people[o].joints)
+            body = self._fit(track.tracker, frame, self._frame_for(frame, labels, o, people[o], props),
+                             people[o].joints)
             if body is not None:
                 results[track.id] = body
             track.seen(self._observed_centre(centres[o], body), looks[o], frame.index)
@@ -202,7 +205,7 @@ class PeopleTracker:
                 self.counts.beyond_max_people += 1
                 continue
             tracker = self._tracker(self._next_id)
-            body = self._fit(tracker, frame, self._frame_for(frame, labels, o, people[o]), people[o].joints)
+            body = self._fit(tracker, frame, self._frame_for(frame, labels, o, people[o], props), people[o].joints)
             if body is not None and body.reason == NO_TORSO and None not in (people[o].segment, people[o].joints):
                 body = self._retry_start(tracker, frame, people[o])
             if body is None or body.state == "lost":  # no person in its detection: no id for it
@@ -222,7 +225,7 @@ class PeopleTracker:
             if track.missed > self.retire_frames:
                 self._retire(track)
             elif track.missed <= COAST_FRAMES and track.tracker.previous is not None:
-                body = self._fit(track.tracker, frame, self._without_people(frame, labels), None)
+                body = self._fit(track.tracker, frame, self._without_people(frame, labels, props), None)
                 if body is not None and body.state != "lost":
                     results[track.id] = replace(body, reason=COASTING)
                     track.centre, track.velocity = self._fit_centre(body, track.centre), np.zeros(3)
@@ -294,12 +297,13 @@ class PeopleTracker:
         return 0 if person.segment is None else int(person.segment.pixels)
 
     @staticmethod
-    def _without_people(frame: Frame, labels: np.ndarray | None) -> Frame:
-        """``frame`` with every segmented person's depth removed (0): what is left of a person
-        the segmentation did not find (mostly hidden) is background to the others."""
-        if labels is None or not np.any(labels):
-            return frame
-        return _depth_removed(frame, labels != 0)
+    def _without_people(frame: Frame, labels: np.ndarray | None, props: np.ndarray | None = None) -> Frame:
+        """``frame`` with every segmented person's depth (and the props') removed (0): what is left
+        of a person the segmentation did not find (mostly hidden) is background to the others."""
+        removed = props
+        if labels is not None and np.any(labels):
+            removed = labels != 0 if removed is None else removed | (labels != 0)
+        return frame if removed is None else _depth_removed(frame, removed)
 
     def _retry_start(self, tracker: BodyTracker, frame: Frame, person: PersonDetection) -> BodyResult | None:
         """A new person's second start when the first found no torso: on the depth of its segment
@@ -309,14 +313,16 @@ class PeopleTracker:
         return self._fit(tracker, frame, seen, person.joints, min(START_MIN_SCORE, tracker.config.min_score))
 
     @staticmethod
-    def _frame_for(frame: Frame, labels: np.ndarray | None, index: int, person: PersonDetection) -> Frame:
-        """``frame`` with the other people's depth removed (0) for person ``index`` (0-based)."""
-        if labels is None or person.segment is None:
-            return frame
-        others = (labels != 0) & (labels != index + 1)
-        if not others.any():
-            return frame
-        return _depth_removed(frame, others)
+    def _frame_for(frame: Frame, labels: np.ndarray | None, index: int, person: PersonDetection,
+                   props: np.ndarray | None = None) -> Frame:
+        """``frame`` with the other people's depth and the props' removed (0) for person ``index``
+        (0-based)."""
+        removed = props
+        if labels is not None and person.segment is not None:
+            others = (labels != 0) & (labels != index + 1)
+            if others.any():
+                removed = others if removed is None else removed | others
+        return frame if removed is None else _depth_removed(frame, removed)
 
 
 def _depth_removed(frame: Frame, where: np.ndarray) -> Frame:
