@@ -59,7 +59,7 @@ def test_the_memory_confirms_a_standing_prop_keeps_it_behind_a_person_and_forget
     box = labels == -1
     rng = np.random.default_rng(0)
     memory = PropMemory()
-    for k in range(CONFIRM_FRAMES):
+    for _ in range(CONFIRM_FRAMES):
         noisy = depth + (rng.normal(0, 0.005, depth.shape) * (depth > 0)).astype(np.float32)
         assert memory.known(noisy, KINECT) is None  # not before it stood still CONFIRM_FRAMES frames
         memory.learn(noisy, KINECT, segment_people(noisy, KINECT).props)

@@ -22,8 +22,8 @@ How they are found:
   its shape (:data:`PROP_REASONS`: too short, too low, too narrow or flat; not a speck or a
   fragment, ``too_small``, not background seen through a gap, ``in_gap``, and not the large
   surfaces of the room, ``too_wide``, ``too_tall``, ``too_high``) whose box comes within
-  :data:`REACH_M` of a person's box in the image (at the person's depth) and whose median depth
-  lies within :data:`REACH_M` of the person's.
+  :data:`REACH_M` of a person's box in the image (at the person's depth) and whose depth range
+  comes within :data:`REACH_M` of the person's.
 * **Over frames** (:class:`PropMemory`): such a candidate becomes a prop once it has stood at the
   same place and depth for :data:`CONFIRM_FRAMES` frames running (a person's legs seen below
   another person are turned down as too low now and then, but move); its depth is remembered (a
@@ -65,20 +65,30 @@ def match_tolerance(z: np.ndarray) -> np.ndarray:
     return MATCH_BASE_M + MATCH_PER_M2 * z * z
 
 
+def _depth_range(frame: SurfaceFrame, piece: Piece) -> tuple[float, float]:
+    """The 2nd and 98th percentile (m) of a piece's depth (on every ``cfg.stride``-th pixel)."""
+    p = frame.coords(piece, frame.cfg.stride)
+    lo, hi = np.percentile(frame.depth[p.v, p.u], [2.0, 98.0])
+    return float(lo), float(hi)
+
+
 def props_beside(frame: SurfaceFrame, rejected: list[Piece], people: list[Piece]) -> np.ndarray | None:
     """(H, W) bool: the pixels of the rejected surfaces that are props beside one of ``people``
-    (see the module docstring), or None when there are none."""
+    (see the module docstring: a rejection of :data:`PROP_REASONS` whose box comes within
+    :data:`REACH_M` of the person's in the image, at the person's depth, and whose depth range comes
+    within :data:`REACH_M` of the person's), or None when there are none."""
     out = None
     H, W = frame.depth.shape
-    for piece in rejected:
-        if piece.reason not in PROP_REASONS or "centroid" not in piece.stats:
-            continue
-        z = float(piece.stats["centroid"][2])
-        for person in people:
-            zp = float(person.stats["centroid"][2])
-            reach = REACH_M * frame.intrinsics.fx / zp
+    candidates = [q for q in rejected if q.reason in PROP_REASONS and q.stats.get("points", 0) >= 8]
+    if not candidates or not people:
+        return None
+    ranges = [_depth_range(frame, person) for person in people]
+    for piece in candidates:
+        lo, hi = _depth_range(frame, piece)
+        for person, (plo, phi) in zip(people, ranges):
+            reach = REACH_M * frame.intrinsics.fx / float(person.stats["centroid"][2])
             b, q = person.box, piece.box
-            if (abs(z - zp) <= REACH_M and q[0] < b[2] + reach and b[0] - reach < q[2]
+            if (max(lo - phi, plo - hi) <= REACH_M and q[0] < b[2] + reach and b[0] - reach < q[2]
                     and q[1] < b[3] + reach and b[1] - reach < q[3]):
                 if out is None:
                     out = np.zeros((H, W), bool)
@@ -142,3 +152,5 @@ class PropMemory:
         grow = now & (same | restart)
         self._sum[grow] += depth[grow]
         self._count[grow] += 1
+        if not self._count.any():  # nothing pending or known: no memory to keep up
+            self.__init__()

@@ -263,6 +263,7 @@ def place_props(specs: Sequence[PropSpec], bodies: Sequence[SkinnedBody], poses:
         else:
             props.append(table_for(bodies[k], poses[k], eye, who, spec.text))
     for prop in props:
-        if np.all(np.abs(prop.local(eye)) <= [0.5 * prop.width, prop.height, 0.5 * prop.depth]):
+        x, y, z = prop.local(eye)
+        if abs(x) <= 0.5 * prop.width and 0.0 <= y <= prop.height and abs(z) <= 0.5 * prop.depth:
             raise ConfigError(f"--prop {prop.spec!r}: the camera stands inside it; move the box or the camera")
     return tuple(props)
