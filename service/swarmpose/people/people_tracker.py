@@ -10,8 +10,10 @@ each one's 2D joints (:func:`swarmpose.detect.per_person.detect_each`):
 2. **Each matched track** runs its own PSO on the frame with *the other people's pixels
    removed from the depth* (set to 0, no measurement): a person in front of this one then
    neither pulls its model forward nor counts against the model's hidden parts, since the
-   depth term skips pixels without a measurement (paper Eq. 2). A track whose fit is lost
-   keeps its id: its tracker restarts from the detection on the next frame.
+   depth term skips pixels without a measurement (paper Eq. 2). The props beside people
+   (:mod:`swarmpose.detect.props`: a table, a stool) are removed from every fit's depth the same
+   way. A track whose fit is lost keeps its id: its tracker restarts from the detection on the
+   next frame.
 3. **New people** (segments no track took), largest first, get a new track while fewer than
    ``max_people`` are tracked; the id is given only when the first fit finds a person. A
    segment whose detection has no torso at the tracker's ``min_score`` is tried once more on
@@ -138,6 +140,7 @@ class PeopleTracker:
         self._spare: list[BodyTracker] = []  # trackers of retired or refused tracks, reused (no new scorer)
         self.budget_ms = 0.0  # each person's share of a frame's time (ms, live); 0: the configured search
         self._last_index: int | None = None  # the frame tracked before this one
+        self._props: np.ndarray | None = None  # this frame's props (H, W) bool, left out of every fit's depth
         self.live = False  # frames may be dropped between two tracked ones (serve): the gate widens for them
 
     @property
@@ -187,6 +190,7 @@ class PeopleTracker:
         props: (H, W) bool pixels of props beside people (:mod:`swarmpose.detect.props`), left out
         of every person's depth, None: none.
         A track whose fit throws restarts (its id stays); the other people go on."""
+        self._props = props
         centres = [self._centre(p) for p in people]
         looks = [colour_histogram(frame.color, p.segment.mask) if p.segment is not None else None for p in people]
         results: dict[int, BodyResult] = {}
@@ -194,8 +198,7 @@ class PeopleTracker:
         self._last_index = frame.index
         for t, o in assignment.pairs:
             track = self.tracks[t]
-            body = self._fit(track.tracker, frame, self._frame_for(frame, labels, o, people[o], props),
-                             people[o].joints)
+            body = self._fit(track.tracker, frame, self._frame_for(frame, labels, o, people[o]), people[o].joints)
             if body is not None:
                 results[track.id] = body
             track.seen(self._observed_centre(centres[o], body), looks[o], frame.index)
@@ -205,7 +208,7 @@ class PeopleTracker:
                 self.counts.beyond_max_people += 1
                 continue
             tracker = self._tracker(self._next_id)
-            body = self._fit(tracker, frame, self._frame_for(frame, labels, o, people[o], props), people[o].joints)
+            body = self._fit(tracker, frame, self._frame_for(frame, labels, o, people[o]), people[o].joints)
             if body is not None and body.reason == NO_TORSO and None not in (people[o].segment, people[o].joints):
                 body = self._retry_start(tracker, frame, people[o])
             if body is None or body.state == "lost":  # no person in its detection: no id for it
@@ -225,7 +228,7 @@ class PeopleTracker:
             if track.missed > self.retire_frames:
                 self._retire(track)
             elif track.missed <= COAST_FRAMES and track.tracker.previous is not None:
-                body = self._fit(track.tracker, frame, self._without_people(frame, labels, props), None)
+                body = self._fit(track.tracker, frame, self._without_people(frame, labels), None)
                 if body is not None and body.state != "lost":
                     results[track.id] = replace(body, reason=COASTING)
                     track.centre, track.velocity = self._fit_centre(body, track.centre), np.zeros(3)
@@ -234,11 +237,15 @@ class PeopleTracker:
     def _fit(self, tracker: BodyTracker, frame: Frame, seen: Frame, joints,
              start_min_score: float | None = None) -> BodyResult | None:
         """One person's tracker on ``seen`` (``frame``, or a copy with other people's depth
-        removed); None (and the tracker restarted) when it throws. start_min_score: as
-        :meth:`BodyTracker.step` takes it."""
+        removed) less this frame's props' depth; None (and the tracker restarted) when it throws.
+        start_min_score: as :meth:`BodyTracker.step` takes it. The props do not make the frame one
+        with others removed (its lost test's looser 2D rule is for people hidden by people)."""
         tracker.budget_ms = self.budget_ms
+        others_removed = seen is not frame
+        if self._props is not None:
+            seen = _depth_removed(seen, self._props)
         try:
-            return tracker.step(seen, joints, others_removed=seen is not frame, start_min_score=start_min_score)
+            return tracker.step(seen, joints, others_removed=others_removed, start_min_score=start_min_score)
         except Exception as exc:  # one person's failure must not cost the others their fit
             log.warning("frame %d: tracking person %d failed (%s: %s); it restarts", frame.index, tracker.body_id,
                         type(exc).__name__, exc)
@@ -297,13 +304,12 @@ class PeopleTracker:
         return 0 if person.segment is None else int(person.segment.pixels)
 
     @staticmethod
-    def _without_people(frame: Frame, labels: np.ndarray | None, props: np.ndarray | None = None) -> Frame:
-        """``frame`` with every segmented person's depth (and the props') removed (0): what is left
-        of a person the segmentation did not find (mostly hidden) is background to the others."""
-        removed = props
-        if labels is not None and np.any(labels):
-            removed = labels != 0 if removed is None else removed | (labels != 0)
-        return frame if removed is None else _depth_removed(frame, removed)
+    def _without_people(frame: Frame, labels: np.ndarray | None) -> Frame:
+        """``frame`` with every segmented person's depth removed (0): what is left of a person
+        the segmentation did not find (mostly hidden) is background to the others."""
+        if labels is None or not np.any(labels):
+            return frame
+        return _depth_removed(frame, labels != 0)
 
     def _retry_start(self, tracker: BodyTracker, frame: Frame, person: PersonDetection) -> BodyResult | None:
         """A new person's second start when the first found no torso: on the depth of its segment
@@ -313,16 +319,14 @@ class PeopleTracker:
         return self._fit(tracker, frame, seen, person.joints, min(START_MIN_SCORE, tracker.config.min_score))
 
     @staticmethod
-    def _frame_for(frame: Frame, labels: np.ndarray | None, index: int, person: PersonDetection,
-                   props: np.ndarray | None = None) -> Frame:
-        """``frame`` with the other people's depth and the props' removed (0) for person ``index``
-        (0-based)."""
-        removed = props
-        if labels is not None and person.segment is not None:
-            others = (labels != 0) & (labels != index + 1)
-            if others.any():
-                removed = others if removed is None else removed | others
-        return frame if removed is None else _depth_removed(frame, removed)
+    def _frame_for(frame: Frame, labels: np.ndarray | None, index: int, person: PersonDetection) -> Frame:
+        """``frame`` with the other people's depth removed (0) for person ``index`` (0-based)."""
+        if labels is None or person.segment is None:
+            return frame
+        others = (labels != 0) & (labels != index + 1)
+        if not others.any():
+            return frame
+        return _depth_removed(frame, others)
 
 
 def _depth_removed(frame: Frame, where: np.ndarray) -> Frame:
