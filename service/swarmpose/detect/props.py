@@ -25,16 +25,19 @@ How they are found:
   :data:`REACH_M` of a person's box in the image (at the person's depth) and whose depth range
   comes within :data:`REACH_M` of the person's.
 * **Over frames** (:class:`PropMemory`): such a candidate becomes a prop once it has stood at the
-  same place and depth for :data:`CONFIRM_FRAMES` frames running (a person's legs seen below
-  another person are turned down as too low now and then, but move); its depth is remembered (a
+  same place and depth for :data:`CONFIRM_FRAMES` frames running in which someone is found (a
+  person's legs seen below another person are turned down as too low now and then, but move: in
+  the synthetic benchmark sequences without props such a candidate never lasted two frames); its
+  depth is remembered (a
   running mean), and in later frames a pixel whose depth matches the remembered one (within
   :func:`match_tolerance`, about 3 sensor noise sigmas) is the prop still standing there. Those
   pixels are left out of the segmentation's foreground, as the floor is, so a person who sits
   down on a stool seen before gets a segment without the stool, and out of every person's depth.
 
-Limits: a prop is known only once it has been seen apart from every person: a stool that someone
-sits on from the first frame is merged into their segment (it touches them at their depth) and
-stays in their depth until they stand up. A prop that is moved is a new surface where it goes;
+Limits: a prop is known only once it has been seen apart from every person for
+:data:`CONFIRM_FRAMES` frames: a stool that someone sits on from the first frame, or stands astride
+while sitting down, is merged into their segment (it touches them at their depth) and stays in
+their depth until they stand up and step away. A prop that is moved is a new surface where it goes;
 a pixel of its old place is forgotten once something farther is seen there. A moving camera makes
 the memory useless (nothing matches); one with another intrinsics starts a new one.
 """
@@ -48,8 +51,9 @@ from swarmpose.detect.depth_surfaces import Piece, SurfaceFrame
 
 PROP_REASONS = ("too_short", "too_low", "too_narrow", "flat")
 """Rejections of surfaces that may be furniture beside a person (see the module docstring)."""
-CONFIRM_FRAMES = 10
-"""A candidate becomes a prop after this many frames running at the same place and depth."""
+CONFIRM_FRAMES = 5
+"""A candidate becomes a prop after this many frames running at the same place and depth (frames
+where the segmentation finds nobody do not count, nor break the run: nothing is beside no one)."""
 REACH_M = 1.0
 """A prop lies within this (m) of a person: in the image at the person's depth, and in depth."""
 MATCH_BASE_M = 0.015

@@ -199,7 +199,8 @@ class FramePipeline:
                 segmentation = segment_people(frame.depth, frame.intrinsics, max_people=2 * self.max_people,
                                               floor=self._floor.plane if reuse else "auto", background=props)
                 self._floor.used(segmentation.floor, frame.intrinsics, fitted=not reuse)
-                self._props.learn(frame.depth, frame.intrinsics, segmentation.props)
+                if segmentation.people:  # a frame with nobody says nothing of what stands beside someone
+                    self._props.learn(frame.depth, frame.intrinsics, segmentation.props)
             except Exception as exc:  # a segmentation that throws: the frame is detected as a whole
                 log.debug("frame %d: segmentation failed: %s", frame.index, exc_message(exc))
             segment_ms = 1000 * (time.perf_counter() - t0)
