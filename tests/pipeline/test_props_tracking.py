@@ -14,11 +14,11 @@ from swarmpose.sim.scoring import body_joints
 from swarmpose.sources.groundtruth import load_ground_truth
 
 SEAT_CLEARANCE_M = 0.06
-"""The tracked hip joints stay at least this far (m) above the stool's top while seated (the truth's
-are 0.11-0.13 m above it; before props were left out of the depth, 0.01 m: the near leg lay on the
-stool's face and pulled the hips down and into it)."""
-DELTA_BOUND_MM = 0.0
-"""Δ over the run (measured: see the test's docstring)."""
+"""The tracked hip joints stay at least this far (m) above the stool's top while seated: the truth's
+are 0.11-0.13 m above it; measured 0.088-0.132 over seeds 0-3 (`swarmpose eval --seed N`)."""
+DELTA_BOUND_MM = 100.0
+"""Δ of the run: 74.3 mm measured (seed 0; 56.7-82.5 over seeds 0-3; 66.6-109.9 before props were
+left out of the depth)."""
 
 
 def _to_box(points: np.ndarray, stool: dict, r_cw: np.ndarray, eye: np.ndarray) -> np.ndarray:
@@ -34,8 +34,9 @@ def _to_box(points: np.ndarray, stool: dict, r_cw: np.ndarray, eye: np.ndarray) 
 def test_a_person_sitting_down_on_a_stool_is_not_fitted_into_it(tmp_path):
     """The MakeHuman male walks to the stool and sits down (the sit-stand clip from 0.6 s, 45 frames
     at 15 fps), seen from the side, where the stool's face lies beside the near leg. The stool is a
-    prop from the 10th frame, before he sits; then the tracked hips stay above the stool's top and
-    no tracked knee or ankle is inside it."""
+    prop from the 5th frame, before he sits; then no tracked knee or ankle is inside it (before
+    props were left out of the depth: in 1, 11, 2 and 2 of the 24 seated frames for seeds 0-3, none
+    since) and the tracked hips stay above its top."""
     out = tmp_path / "sit"
     person = f"makehuman:{MAKEHUMAN}:male:{MOCAP / 'cmu_14_31_sit_stepstool_standup.bvh'}@0,0,0,0.6"
     assert main(["synth", "--person", person, "--fps", "15", "--frames", "45", "--camera-yaw", "90",
