@@ -28,11 +28,11 @@ How they are found:
   same place and depth for :data:`CONFIRM_FRAMES` frames running in which someone is found (a
   person's legs seen below another person are turned down as too low now and then, but move: in
   the synthetic benchmark sequences without props such a candidate never lasted two frames); its
-  depth is remembered (a
-  running mean), and in later frames a pixel whose depth matches the remembered one (within
-  :func:`match_tolerance`, about 3 sensor noise sigmas) is the prop still standing there. Those
-  pixels are left out of the segmentation's foreground, as the floor is, so a person who sits
-  down on a stool seen before gets a segment without the stool, and out of every person's depth.
+  depth is remembered (a running mean), and in later frames a pixel whose depth matches the
+  remembered one (within :func:`match_tolerance`, about 3 sensor noise sigmas) is the prop still
+  standing there. Those pixels are left out of the segmentation's foreground, as the floor is, so a
+  person who sits down on a stool seen before gets a segment without the stool, and out of every
+  person's depth.
 
 Limits: a prop is known only once it has been seen apart from every person for
 :data:`CONFIRM_FRAMES` frames: a stool that someone sits on from the first frame, or stands astride
