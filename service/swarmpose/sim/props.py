@@ -124,8 +124,9 @@ class Prop:
         return Solid((self.corners() - eye) @ world_to_camera.T, _TRIANGLES.copy(), ALBEDOS[self.kind])
 
     def as_dict(self, world_to_camera: np.ndarray, eye: np.ndarray) -> dict:
-        """The truth's description: kind, spec, world footprint centre, size, yaw, and in the camera
-        frame its centre (of the volume), axes (rows: the box's x, y, z) and corners (8, 3)."""
+        """The truth's description: kind, spec, in the world its footprint's centre, size (width,
+        height, depth: along the box's x, y, z) and yaw, and in the camera frame its centre (of the
+        volume), axes (rows: the box's x, y (up), z) and corners (8, 3, as :meth:`corners`)."""
         centre = np.array([self.x, 0.5 * self.height, self.z])
         return {"kind": self.kind, "spec": self.spec,
                 "world": {"centre_floor_m": [round(self.x, 6), 0.0, round(self.z, 6)],
