@@ -384,3 +384,22 @@ def test_skeltrack_hands_and_overlapping_people_go_to_their_owner(name):
         assert len(back) == 1 and not back & front
         near, far = seg.people[front.pop() - 1], seg.people[back.pop() - 1]
         assert near.centroid_m[2] + 0.4 < far.centroid_m[2]
+
+
+def test_the_head_height_profile_is_scipys_binned_maximum_smoothed():
+    from scipy.ndimage import maximum, uniform_filter1d
+
+    from swarmpose.detect.people import height_profile
+
+    rng = np.random.default_rng(3)
+    for n_bins in (1, 2, 7, 40):
+        bins = rng.integers(0, n_bins, 300)
+        if n_bins > 2:
+            bins[bins == 1] = 0  # an empty bin
+        bins[-1] = n_bins - 1
+        heights = rng.uniform(0.2, 1.9, 300)
+        low = heights.min()
+        expected = np.asarray(maximum(heights, bins, np.arange(n_bins)), dtype=np.float64)
+        expected[np.bincount(bins, minlength=n_bins) == 0] = low
+        expected = np.concatenate([[low], uniform_filter1d(expected, 3, mode="nearest"), [low]])
+        np.testing.assert_allclose(height_profile(heights, bins), expected, rtol=0, atol=1e-12)

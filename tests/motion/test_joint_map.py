@@ -162,7 +162,7 @@ def test_a_map_that_lacks_keys_or_names_absent_joints_says_which(tmp_path):
 @pytest.mark.parametrize(("spec", "message"), [
     ("clip.bvh?units=furlong", "units='furlong' is not a unit"),
     ("clip.bvh?up=w", "up='w' is not an axis"),
-    ("clip.bvh?scale=2", "options after '?' are map=FILE.toml, units=UNIT and up=AXIS"),
+    ("clip.bvh?scale=2", "options after '?' are map=FILE.toml, units=UNIT, up=AXIS and hold=[AT:]SECONDS"),
     ("clip.bvh?up=y&up=z", "each once"),
     ("clip.bvh?map=", "map has no value"),
     ("clip.bvh?map=nowhere.toml", "joint map nowhere.toml does not exist; check the path after ?map="),

@@ -108,3 +108,20 @@ def test_the_gate_widens_with_the_frames_dropped_since_the_last_tracked_one():
         tracker._last_index = 10
         result = tracker._associate(11 + dropped, people, moved, [None])
         assert (result.pairs == ((0, 0),)) == paired, (dropped, GATE_M + DROPPED_GATE_M * dropped)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 5), (4, 1), (3, 3), (2, 5)])
+def test_assignment_costs_what_scipys_solver_finds(shape):
+    from scipy.optimize import linear_sum_assignment
+
+    rng = np.random.default_rng(sum(shape))
+    for _ in range(50):
+        cost = rng.uniform(0.0, 2.0, shape).round(1)  # rounded: ties happen
+        cost[rng.random(shape) < 0.3] = NO_PAIR
+        got = assign(cost)
+        rows, cols = linear_sum_assignment(cost)
+        kept = [(r, c) for r, c in zip(rows, cols) if cost[r, c] < NO_PAIR]
+        assert len(got.pairs) == len(kept)
+        assert sum(cost[r, c] for r, c in got.pairs) == pytest.approx(sum(cost[r, c] for r, c in kept))
+        assert len({r for r, _ in got.pairs}) == len(got.pairs) == len({c for _, c in got.pairs})
+        assert sorted([r for r, _ in got.pairs] + list(got.lone_tracks)) == list(range(shape[0]))

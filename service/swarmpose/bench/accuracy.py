@@ -11,6 +11,10 @@ with the subject's own shape, and score it against the ground truth:
 * ``detector_px`` the detector's median 2D error on the limbs' joints against the true
   projections, and ``swapped`` the share of frames where its left/right torso labels fit the
   truth better swapped,
+* ``flipped`` frames (the torso facing more than 90° off), ``sides_swapped`` frames (the
+  estimate's left/right torso joints fit the truth better exchanged), ``flips`` and their
+  ``recovery_mean_s`` / ``recovery_max_s`` (to the first right frame; ``unrecovered`` 1 when the
+  last flip lasted to the end), see :mod:`.flip_metrics`,
 * ``fps`` of detection + tracking.
 
 Each (cell, mode) is one JSON file in ``OUT/results/``, written when it is done: an
@@ -26,13 +30,15 @@ from __future__ import annotations
 import logging
 import shutil
 from contextlib import ExitStack
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from functools import lru_cache, partial
 from pathlib import Path
 
 import numpy as np
 
 from swarmpose.bench.detect import find_assets
+from swarmpose.bench.flip_metrics import flip_metrics
+from swarmpose.bench.hard_motions import FPS, HARD_MOTIONS, segment_frames
 from swarmpose.bench.matrix import DETECTORS, MODES, MOTIONS, Cell, Sequence, cells
 from swarmpose.bench.store import mode_settings, read_record, seeded, tracker_settings, write_record
 from swarmpose.body.loader import load_body
@@ -46,7 +52,8 @@ from swarmpose.pipeline.config import ServiceConfig
 from swarmpose.pipeline.run import RunSummary, results
 from swarmpose.pipeline.service import open_parts
 from swarmpose.sim.evaluate import facing_errors_deg, joint_errors, summarise
-from swarmpose.sim.synth import SynthConfig, synthesize
+from swarmpose.sim.scene import PersonSpec, load_people
+from swarmpose.sim.synth import SynthConfig, synthesize, synthesize_people
 from swarmpose.tracking.config import TrackerConfig
 
 log = logging.getLogger(__name__)
@@ -63,20 +70,46 @@ def subject(assets: str, shape: str):
 
 
 def make_sequence(seq: Sequence, folder: Path, frames: int, assets: Path) -> Path:
-    """``folder`` holding ``frames`` frames of ``seq`` (rendered unless already there, complete)."""
+    """``folder`` holding ``frames`` frames of ``seq`` (rendered unless already there, complete);
+    a hard motion's from its segment's start, turned to face the camera at yaw 0 (:mod:`.hard_motions`)."""
     gt = folder / "groundtruth.jsonl"
     if gt.exists() and sum(1 for _ in gt.open()) >= frames:
         return folder
-    body = subject(str(assets), seq.shape)
-    motion = load_motion_spec(str(assets / MOTIONS[seq.motion]), body, frames, 30.0)
-    config = SynthConfig(frames=frames, camera_yaw_deg=float(seq.yaw_deg), camera_height=seq.camera_height,
-                         camera_distance=seq.camera_distance)
+    config = synth_config(seq, frames)
     tmp = folder.with_name(folder.name + ".partial")
     shutil.rmtree(tmp, ignore_errors=True)  # left by an interrupted run
-    synthesize(body, motion, tmp, config, description={"benchmark": asdict(seq)}, progress=False)
+    if seq.motion in HARD_MOTIONS:
+        film_segment(seq, tmp, config, assets)
+    else:
+        body = subject(str(assets), seq.shape)
+        motion = load_motion_spec(str(assets / MOTIONS[seq.motion]), body, frames, FPS)
+        synthesize(body, motion, tmp, config, description={"benchmark": asdict(seq)}, progress=False)
     shutil.rmtree(folder, ignore_errors=True)  # too short for this run's --frames
     tmp.rename(folder)
     return folder
+
+
+def synth_config(seq: Sequence, frames: int) -> SynthConfig:
+    """How ``seq`` is filmed: ``frames`` frames at 30 fps from its camera."""
+    if seq.props:  # once synth places props: SynthConfig(..., props=tuple(parse_prop_spec(p) for p in seq.props))
+        raise ConfigError(f"sequence {seq.name}: props {', '.join(seq.props)} cannot be rendered yet (synth places "
+                          "no props); leave the motion's props empty")
+    return SynthConfig(frames=frames, fps=FPS, camera_yaw_deg=float(seq.yaw_deg), camera_height=seq.camera_height,
+                       camera_distance=seq.camera_distance)
+
+
+def film_segment(seq: Sequence, out: Path, config: SynthConfig, assets: Path) -> None:
+    """Render ``seq``'s hard motion into ``out``: its clip from the segment's start (the scene
+    spec's ``start``), turned about the vertical (its ``yaw``) so that the pelvis faces the
+    camera of yaw 0 at the first frame."""
+    clip = HARD_MOTIONS[seq.motion]
+    spec = PersonSpec(f"makehuman:{assets}/bodies/makehuman", seq.shape, str(assets / clip.clip), start_s=clip.start_s)
+    person = load_people([spec], config.frames, config.fps)[0]
+    forward = person.motion.root_rotation[0][:, 2]  # the pelvis's forward axis in the clip's world frame
+    facing = float(np.degrees(np.arctan2(forward[0], forward[2])))
+    person = replace(person, spec=replace(spec, yaw_deg=-facing))
+    synthesize_people([person], out, config, progress=False,
+                      description={"benchmark": asdict(seq), "segment": {**asdict(clip), "turned_deg": -facing}})
 
 
 def _pixel_gap(found: dict, truth: np.ndarray, index: dict[str, int], detected: str, true: str) -> float:
@@ -106,8 +139,9 @@ class TrackedRun:
     """One source tracked against its ground truth: estimates and truth (F, J, 3) m in
     ``EVAL_JOINTS`` order (NaN rows where the body was lost), the detections (Joints2D or
     None per frame), lost frames, the run's summary, the camera and every frame's timings
-    (ms, the frame message's ``timings_ms``), the published poses (F, 36) (NaN rows: lost) and the
-    frames' capture times (F,) s."""
+    (ms, the frame message's ``timings_ms``), the published poses (F, 36) (NaN rows: lost), the
+    frames' capture times (F,) s and the joints as the search found them before any smoothing
+    (F, J, 3) m (the estimates themselves when nothing is smoothed)."""
 
     estimates: np.ndarray
     truth: np.ndarray
@@ -118,12 +152,13 @@ class TrackedRun:
     timings: list[dict[str, float]]
     poses: np.ndarray
     times_s: np.ndarray
+    unsmoothed: np.ndarray
 
 
 def track_with_truth(config: ServiceConfig, frames: int = 0) -> TrackedRun:
     """Track ``config``'s source (its first ``frames``; 0 = all) and collect estimates beside its ground truth."""
     summary = RunSummary()
-    estimates, detections, timings, done, poses, times, lost = [], [], [], [], [], [], 0
+    estimates, detections, timings, done, poses, times, unsmoothed, lost = [], [], [], [], [], [], [], 0
     with ExitStack() as stack:
         parts = open_parts(config, stack, score=False, need_ground_truth=True)
         truth_of = parts.source.ground_truth
@@ -133,6 +168,7 @@ def track_with_truth(config: ServiceConfig, frames: int = 0) -> TrackedRun:
             found = body is not None and body.state != "lost"
             lost += not found
             estimates.append(body.joints3d if found else np.full((len(EVAL_JOINTS), 3), np.nan))
+            unsmoothed.append(body.found.joints3d if found else np.full((len(EVAL_JOINTS), 3), np.nan))
             poses.append(body.pose if found and body.pose is not None else np.full(POSE_DIM, np.nan))
             times.append(result.timestamp_ns * 1e-9)
             detections.append(body.detection if body is not None else None)
@@ -141,7 +177,7 @@ def track_with_truth(config: ServiceConfig, frames: int = 0) -> TrackedRun:
     truth = truth_of.joints3d[[truth_of.row(f) for f in done]]
     return TrackedRun(np.asarray(estimates, float).reshape(-1, len(EVAL_JOINTS), 3), truth, detections, lost,
                       summary, intrinsics, timings, np.asarray(poses, float).reshape(-1, POSE_DIM),
-                      np.asarray(times, float))
+                      np.asarray(times, float), np.asarray(unsmoothed, float).reshape(-1, len(EVAL_JOINTS), 3))
 
 
 def scores(run: TrackedRun) -> dict:
@@ -154,7 +190,8 @@ def scores(run: TrackedRun) -> dict:
     return {"frames": len(run.estimates), "mpjpe_mm": score["mpjpe_mm"], "A100": score["A"][100], "lost": run.lost,
             "facing_deg": float(np.mean(facing[known])) if known.any() else None,
             "facing_ok": float(np.mean(facing[known] <= FACING_OK_DEG)) if known.any() else 0.0,
-            "detector_px": px, "swapped": swapped, "fps": run.summary.fps}
+            "detector_px": px, "swapped": swapped, "fps": run.summary.fps,
+            **flip_metrics(run.estimates, run.truth, run.times_s)}
 
 
 def track_cell(cell: Cell, mode: str, folder: Path, assets: Path, tracker: dict, frames: int = 0) -> dict:
@@ -164,15 +201,17 @@ def track_cell(cell: Cell, mode: str, folder: Path, assets: Path, tracker: dict,
     config = ServiceConfig(source=str(folder), detector=spec, body=f"makehuman:{assets}/bodies/makehuman",
                            shape=cell.sequence.shape, tracker=TrackerConfig(mode=mode, **tracker), overlay=False)
     run = track_with_truth(config, frames)
-    return {"cell": cell.name, "mode": mode, **asdict(cell.sequence), "detector": cell.detector,
-            **scores(run), **tracker}
+    return {"cell": cell.name, "mode": mode, **asdict(cell.sequence), "props": list(cell.sequence.props),
+            "detector": cell.detector, **scores(run), **tracker}
 
 
 def run_matrix(out: Path, *, subset: str = "full", detectors: tuple[str, ...] | None = None,
                modes: tuple[str, ...] = MODES, frames: int = 40, tracker: dict | None = None,
-               assets: str | Path | None = None, progress: bool = True, seeds: int = 1) -> list[dict]:
+               assets: str | Path | None = None, progress: bool = True, seeds: int = 1,
+               motions: tuple[str, ...] | None = None) -> list[dict]:
     """Every (cell, mode, seed) record of the matrix (computed, or read back from ``out/results``);
-    ``seeds`` tracker seeds per (cell, mode), 0 .. seeds - 1."""
+    ``seeds`` tracker seeds per (cell, mode), 0 .. seeds - 1; ``motions`` limits the cells to those
+    motions' sequences; ``frames`` per sequence (a hard motion's at most its segment's)."""
     if frames < 2:
         raise ConfigError(f"--frames must be at least 2, got {frames}")
     if seeds < 1:
@@ -184,16 +223,18 @@ def run_matrix(out: Path, *, subset: str = "full", detectors: tuple[str, ...] | 
     tracker = tracker_settings(tracker)
     out = Path(out)
     (out / "results").mkdir(parents=True, exist_ok=True)
-    todo = [(cell, mode, seed) for seed in range(seeds) for cell in cells(subset, detectors) for mode in modes]
+    todo = [(cell, mode, seed) for seed in range(seeds) for cell in cells(subset, detectors, motions)
+            for mode in modes]
     records = []
     with progress_bar("bench accuracy", len(todo), enabled=progress, unit="run") as bar:
         for cell, mode, seed in todo:
             settings, suffix = seeded(mode_settings(tracker, mode), seed)
             path = out / "results" / f"{cell.name}-{mode}{suffix}.json"
-            record = read_record(path, {"frames": frames, **settings})
+            count = segment_frames(cell.sequence.motion, frames)
+            record = read_record(path, {"frames": count, **settings})
             if record is None:
-                folder = make_sequence(cell.sequence, out / "sequences" / cell.sequence.name, frames, root)
-                record = track_cell(cell, mode, folder, root, settings, frames)
+                folder = make_sequence(cell.sequence, out / "sequences" / cell.sequence.name, count, root)
+                record = track_cell(cell, mode, folder, root, settings, count)
                 write_record(path, record)
                 log.info("%s %s seed %d: %.1f mm", cell.name, mode, seed, record["mpjpe_mm"] or float("nan"))
             records.append(record)
@@ -204,6 +245,8 @@ def run_matrix(out: Path, *, subset: str = "full", detectors: tuple[str, ...] | 
 AVERAGED = ("mpjpe_mm", "A100", "lost", "facing_deg", "facing_ok", "fps", "detector_px", "swapped")
 """The fields of a record :func:`mean_over_seeds` averages (the others are the same for every seed;
 the detector's errors are not: it runs on a crop around the track)."""
+FLIP_COUNTS = ("flipped", "sides_swapped", "flips", "unrecovered")
+"""Flip fields (:mod:`.flip_metrics`) averaged over seeds; records made before them have none."""
 
 
 def mean_over_seeds(records: list[dict]) -> list[dict]:
@@ -218,7 +261,23 @@ def mean_over_seeds(records: list[dict]) -> list[dict]:
         for key in AVERAGED:
             values = [r.get(key) for r in group]
             out[key] = None if any(v is None for v in values) else float(np.mean(values))
+        if any("flips" in r for r in group):
+            out.update(_flips_over_seeds(group))
         out["seeds"] = len(group)
         out["mpjpe_spread_mm"] = None if out["mpjpe_mm"] is None else float(np.ptp([r["mpjpe_mm"] for r in group]))
         merged.append(out)
     return merged
+
+
+def _flips_over_seeds(group: list[dict]) -> dict:
+    """The flip fields of one (cell, mode)'s seeds: counts averaged (None when a seed has none),
+    the mean recovery over the seeds with a flip, the longest recovery of any."""
+    out = {}
+    for key in FLIP_COUNTS:
+        values = [r.get(key) for r in group]
+        out[key] = None if any(v is None for v in values) else float(np.mean(values))
+    means = [r["recovery_mean_s"] for r in group if r.get("recovery_mean_s") is not None]
+    longest = [r["recovery_max_s"] for r in group if r.get("recovery_max_s") is not None]
+    out["recovery_mean_s"] = float(np.mean(means)) if means else None
+    out["recovery_max_s"] = float(np.max(longest)) if longest else None
+    return out

@@ -14,12 +14,17 @@ every detector and every motion meets three yaws:
 ``subset="regression"`` is the small set ``make test`` runs: the walk seen from the side
 (90°) and from behind (180°), and jumping jacks from behind on the heavy male (the cell whose
 start locked into the mirrored facing when MoveNet swapped sides on its first frame), MoveNet.
+
+``subset="hard"`` is the hard motions' own design (turning walk, sit-stand, run, pick-up, two
+kicks at every yaw, MoveNet and BlazePose; :mod:`.hard_motions`), ``"hard-regression"`` its
+small set for the slow test tier.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from swarmpose.bench.hard_motions import HARD_MOTIONS, hard_plan
 from swarmpose.core.errors import ConfigError
 
 YAWS: tuple[int, ...] = (0, 45, 90, 135, 180)
@@ -49,23 +54,29 @@ DETECTORS: dict[str, str] = {
 
 MODES: tuple[str, ...] = ("hybrid", "joints", "depth", "lift")
 
-SUBSETS = ("full", "regression")
+SUBSETS = ("full", "regression", "hard", "hard-regression")
+SUBSET_DETECTORS: dict[str, tuple[str, ...]] = {"full": tuple(DETECTORS), "regression": ("movenet",),
+                                                "hard": ("movenet", "blazepose"), "hard-regression": ("movenet",)}
+"""The detectors a subset's cells use unless told otherwise."""
 
 
 @dataclass(frozen=True)
 class Sequence:
-    """One synthetic sequence of the matrix: motion, subject shape and camera."""
+    """One synthetic sequence of the matrix: motion, subject shape, camera, and the props of the
+    scene (``synth --prop`` specs)."""
 
     motion: str
     shape: str
     yaw_deg: int
     camera_height: float
     camera_distance: float
+    props: tuple[str, ...] = ()
 
     @property
     def name(self) -> str:
         return (f"{self.motion}-{self.shape}-yaw{self.yaw_deg:03d}"
-                f"-h{self.camera_height:.1f}-d{self.camera_distance:.1f}")
+                f"-h{self.camera_height:.1f}-d{self.camera_distance:.1f}"
+                + "".join(f"-{p.replace(':', '_')}" for p in self.props))
 
 
 @dataclass(frozen=True)
@@ -84,6 +95,10 @@ def sequences(subset: str = "full") -> list[Sequence]:
     """The matrix's sequences (see the module docstring)."""
     if subset not in SUBSETS:
         raise ConfigError(f"unknown benchmark subset {subset!r}; choose one of {', '.join(SUBSETS)}")
+    if subset in ("hard", "hard-regression"):
+        return [Sequence(motion, shape, yaw, height, distance, HARD_MOTIONS[motion].props)
+                for motion, shape, yaw, (height, distance) in hard_plan(YAWS, SHAPES, PLACEMENTS,
+                                                                       subset == "hard-regression")]
     if subset == "regression":
         height, distance = PLACEMENTS[0]
         return ([Sequence("walk", "male", yaw, height, distance) for yaw in (90, 180)]
@@ -98,10 +113,20 @@ def sequences(subset: str = "full") -> list[Sequence]:
     return out
 
 
-def cells(subset: str = "full", detectors: tuple[str, ...] | None = None) -> list[Cell]:
-    """Every (sequence, detector) of the subset; ``detectors`` limits them (names of :data:`DETECTORS`)."""
-    chosen = tuple(detectors) if detectors else (("movenet",) if subset == "regression" else tuple(DETECTORS))
+def cells(subset: str = "full", detectors: tuple[str, ...] | None = None,
+          motions: tuple[str, ...] | None = None) -> list[Cell]:
+    """Every (sequence, detector) of the subset; ``detectors`` limits them (names of :data:`DETECTORS`;
+    default: the subset's, :data:`SUBSET_DETECTORS`), ``motions`` to the sequences of those motions."""
+    seqs = sequences(subset)
+    chosen = tuple(detectors) if detectors else SUBSET_DETECTORS[subset]
     unknown = [d for d in chosen if d not in DETECTORS]
     if unknown:
         raise ConfigError(f"unknown detector {unknown[0]!r} for the benchmark; choose from {', '.join(DETECTORS)}")
-    return [Cell(seq, det) for seq in sequences(subset) for det in chosen]
+    if motions:
+        present = list(dict.fromkeys(s.motion for s in seqs))
+        missing = [m for m in motions if m not in present]
+        if missing:
+            raise ConfigError(f"motion {missing[0]!r} is not in the {subset!r} subset; choose from "
+                              f"{', '.join(present)}")
+        seqs = [s for s in seqs if s.motion in motions]
+    return [Cell(seq, det) for seq in seqs for det in chosen]

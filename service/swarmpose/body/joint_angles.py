@@ -11,7 +11,6 @@ import warnings
 from collections.abc import Callable
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from swarmpose.body.kinematics import compose_joint, shortest_arc
 from swarmpose.body.skeleton import ANGLE_LIMITS, N_ANGLES, TRACKING_JOINTS, angle_offset
@@ -60,6 +59,8 @@ def decompose_joint(joint_index: int, rotation: np.ndarray) -> np.ndarray:
     signs = [float(np.sign(ax[np.argmax(np.abs(ax))])) for ax in axes]
     if len(letters) == 2:
         letters.append(next(t for t in "XYZ" if t not in letters))
+    from scipy.spatial.transform import Rotation  # here: scipy.spatial takes 0.5 s to import; retargeting needs it
+
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # gimbal lock: scipy picks one of the solutions
         euler = Rotation.from_matrix(rotation).as_euler("".join(letters))

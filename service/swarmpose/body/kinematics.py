@@ -30,73 +30,16 @@ from swarmpose.body.skeleton import (
     angle_offset,
 )
 from swarmpose.core.errors import ShapeError, check_shape
+from swarmpose.core.rotations import (  # noqa: F401  (re-exported: the body's modules import them from here)
+    matrix_to_quaternion,
+    quaternion_multiply,
+    quaternion_to_matrix,
+    to_wxyz,
+    to_xyzw,
+)
 
 
 # ---------------------------------------------------------------------------- rotations
-def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Unit quaternions (..., 4) wxyz -> rotation matrices (..., 3, 3). Normalises first."""
-    q = np.asarray(q, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
-
-
-def matrix_to_quaternion(m: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) -> unit quaternions (..., 4) wxyz with w >= 0."""
-    m = np.asarray(m, dtype=np.float64)
-    tr = np.trace(m, axis1=-2, axis2=-1)
-    # Four candidate formulas; pick the numerically largest denominator per matrix.
-    cand = np.stack([
-        tr,
-        2 * m[..., 0, 0] - tr,
-        2 * m[..., 1, 1] - tr,
-        2 * m[..., 2, 2] - tr,
-    ], -1)
-    k = np.argmax(cand, axis=-1)
-    q = np.empty(m.shape[:-2] + (4,))
-    s = np.sqrt(np.maximum(1.0 + np.max(cand, axis=-1), 1e-300)) * 2  # 4 * |component|
-    sel = k == 0
-    q[sel] = np.stack([0.25 * s[sel], (m[sel, 2, 1] - m[sel, 1, 2]) / s[sel],
-                       (m[sel, 0, 2] - m[sel, 2, 0]) / s[sel], (m[sel, 1, 0] - m[sel, 0, 1]) / s[sel]], -1)
-    sel = k == 1
-    q[sel] = np.stack([(m[sel, 2, 1] - m[sel, 1, 2]) / s[sel], 0.25 * s[sel],
-                       (m[sel, 0, 1] + m[sel, 1, 0]) / s[sel], (m[sel, 0, 2] + m[sel, 2, 0]) / s[sel]], -1)
-    sel = k == 2
-    q[sel] = np.stack([(m[sel, 0, 2] - m[sel, 2, 0]) / s[sel], (m[sel, 0, 1] + m[sel, 1, 0]) / s[sel],
-                       0.25 * s[sel], (m[sel, 1, 2] + m[sel, 2, 1]) / s[sel]], -1)
-    sel = k == 3
-    q[sel] = np.stack([(m[sel, 1, 0] - m[sel, 0, 1]) / s[sel], (m[sel, 0, 2] + m[sel, 2, 0]) / s[sel],
-                       (m[sel, 1, 2] + m[sel, 2, 1]) / s[sel], 0.25 * s[sel]], -1)
-    q /= np.linalg.norm(q, axis=-1, keepdims=True)
-    return np.where(q[..., :1] < 0, -q, q)
-
-
-def to_xyzw(q: np.ndarray) -> np.ndarray:
-    """Quaternions (..., 4) ``[w, x, y, z]`` (this module's order) as ``[x, y, z, w]`` (the messages' and ROS's)."""
-    return np.roll(np.asarray(q, dtype=np.float64), -1, axis=-1)
-
-
-def to_wxyz(q: np.ndarray) -> np.ndarray:
-    """Quaternions (..., 4) ``[x, y, z, w]`` as ``[w, x, y, z]``."""
-    return np.roll(np.asarray(q, dtype=np.float64), 1, axis=-1)
-
-
-def quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of quaternions (..., 4) wxyz, broadcasting."""
-    aw, ax, ay, az = np.moveaxis(np.asarray(a, dtype=np.float64), -1, 0)
-    bw, bx, by, bz = np.moveaxis(np.asarray(b, dtype=np.float64), -1, 0)
-    return np.stack([
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    ], -1)
-
-
 def axis_angle_matrix(axis, angle: np.ndarray) -> np.ndarray:
     """Rotation by ``angle`` (..., rad) about unit ``axis`` (3,) -> (..., 3, 3) (Rodrigues)."""
     a = np.asarray(axis, dtype=np.float64)

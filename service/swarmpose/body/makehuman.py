@@ -25,6 +25,7 @@ import numpy as np
 from swarmpose.body.landmarks import face_landmarks, foot_landmarks
 from swarmpose.body.skeleton import JOINT_INDEX
 from swarmpose.body.skinned import SkinnedBody, body_frame_bind_matrices, sparse_skin
+from swarmpose.core.cache import cache_key, cached_arrays
 from swarmpose.core.errors import AssetError, ConfigError
 
 DECIMETRE = 0.1
@@ -85,9 +86,22 @@ def _joint_points(side: str, s: str) -> dict[str, tuple[str, str]]:
 
 
 # ----------------------------------------------------------------------------- file parsing
+GROUP_PREFIX = "group:"
+"""The cache entry of base.obj stores each group's faces under this prefix and its name."""
+
+
 @lru_cache(maxsize=4)
 def _read_obj(path: str) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """All vertices (N, 3) in decimetres and each group's faces as vertex index arrays."""
+    """All vertices (N, 3) in decimetres and each group's faces as vertex index arrays; from the
+    cache when this file was read before (parsing its text takes a start 0.3-0.7 s)."""
+    key = cache_key("makehuman-obj", sources=(Path(path), Path(__file__)))
+    arrays = cached_arrays("makehuman_obj", key, lambda: _parse_obj(path))
+    groups = {name[len(GROUP_PREFIX):]: faces for name, faces in arrays.items() if name.startswith(GROUP_PREFIX)}
+    return arrays["vertices"], groups
+
+
+def _parse_obj(path: str) -> dict[str, np.ndarray]:
+    """base.obj's ``vertices`` and its groups' faces (``group:NAME``), parsed from the text."""
     verts: list[list[float]] = []
     faces: dict[str, list[list[int]]] = {}
     group = "default"
@@ -111,7 +125,7 @@ def _read_obj(path: str) -> tuple[np.ndarray, dict[str, np.ndarray]]:
             arrays[g] = np.asarray(f, dtype=np.int64)
         else:
             arrays[g] = np.asarray([x[:3] for x in f] + [[x[0], x[2], x[3]] for x in f if len(x) == 4], dtype=np.int64)
-    return np.asarray(verts, dtype=np.float64), arrays
+    return {"vertices": np.asarray(verts, dtype=np.float64), **{GROUP_PREFIX + g: f for g, f in arrays.items()}}
 
 
 @lru_cache(maxsize=64)
@@ -198,12 +212,25 @@ def _rig_assets(directory: str) -> _RigAssets:
     all_verts, groups = _read_obj(str(root / "base.obj"))
     try:
         rig = json.loads((root / RIG_FILE).read_text())
-        weights = json.loads((root / WEIGHTS_FILE).read_text())["weights"]
-    except (OSError, ValueError, KeyError) as exc:
-        raise AssetError(f"cannot read the cmu_mb rig in {root / 'rigs'}: {exc}") from exc
+    except (OSError, ValueError) as exc:
+        raise AssetError(f"cannot read the cmu_mb rig {root / RIG_FILE}: {exc}") from exc
     names = _topological(rig)
     index = {n: i for i, n in enumerate(names)}
     parents = np.array([index[rig[n]["parent"]] if rig[n].get("parent") else -1 for n in names])
+    key = cache_key("makehuman-skin", names, sources=(root / "base.obj", root / WEIGHTS_FILE, Path(__file__)))
+    skin = cached_arrays("makehuman_skin", key, lambda: _skin(all_verts, groups, names, root))
+    return _RigAssets(names, rig, parents, skin["body_faces"], skin["used"], skin["skin_idx"], skin["skin_w"])
+
+
+def _skin(all_verts: np.ndarray, groups: dict[str, np.ndarray], names: list[str], root: Path) -> dict[str, np.ndarray]:
+    """The body group's triangles (T, 3) over its own vertices, which of base.obj's vertices
+    those are (``used``), and their sparse skin over the bones ``names`` (read from the weights
+    file, 3 MB of JSON)."""
+    try:
+        weights = json.loads((root / WEIGHTS_FILE).read_text())["weights"]
+    except (OSError, ValueError, KeyError) as exc:
+        raise AssetError(f"cannot read the cmu_mb weights {root / WEIGHTS_FILE}: {exc}") from exc
+    index = {n: i for i, n in enumerate(names)}
     body_faces = _triangulate(groups["body"])
     used = np.unique(body_faces)
     remap = np.full(len(all_verts), -1, dtype=np.int64)
@@ -215,7 +242,7 @@ def _rig_assets(directory: str) -> _RigAssets:
         arr = np.asarray(pairs, dtype=np.float64).reshape(-1, 2)
         dense[arr[:, 0].astype(np.int64), index[bone]] = arr[:, 1]
     skin_idx, skin_w = sparse_skin(dense[used], len(used))
-    return _RigAssets(names, rig, parents, remap[body_faces].astype(np.int32), used, skin_idx, skin_w)
+    return {"body_faces": remap[body_faces].astype(np.int32), "used": used, "skin_idx": skin_idx, "skin_w": skin_w}
 
 
 def _check_directory(root: Path) -> None:

@@ -133,8 +133,13 @@ class SkinnedBody:
 
     @cached_property
     def rest_angles(self) -> np.ndarray:
-        """(29,) the joint angles of this body's rest pose (zero = the T-pose), rad."""
-        return rest_angles(self.point)
+        """(29,) the joint angles of this body's rest pose (zero = the T-pose), rad; cached, since
+        finding them takes scipy's rotations, whose import costs every start about half a second."""
+        from swarmpose.body import joint_angles, skeleton
+
+        key = cache_key(self.point_names, self.point_rest.tobytes(), version("scipy"),
+                        sources=(Path(joint_angles.__file__), Path(skeleton.__file__)))
+        return cached_arrays("rest_angles", key, lambda: {"angles": rest_angles(self.point)})["angles"]
 
     @cached_property
     def rig(self) -> Rig:

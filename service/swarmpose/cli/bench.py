@@ -1,4 +1,5 @@
-"""``swarmpose bench score|detect|accuracy|utdmhad|overlays``: the benchmarks BENCHMARKS.md records."""
+"""``swarmpose bench score|track|live|detect|accuracy|utdmhad|still|overlays``: the benchmarks BENCHMARKS.md
+records."""
 
 from __future__ import annotations
 
@@ -6,7 +7,9 @@ import argparse
 import json
 from pathlib import Path
 
-from swarmpose.bench.matrix import DETECTORS, MODES, SUBSETS
+from swarmpose.bench.hard_motions import HARD_MOTIONS
+from swarmpose.bench.matrix import DETECTORS, MODES, MOTIONS, SUBSETS
+from swarmpose.bench.still_plan import StillPlan
 from swarmpose.bench.store import BENCH_SETTINGS
 from swarmpose.bench.utdmhad_names import ACTIONS, SHAPES, SUBJECTS
 from swarmpose.cli.common import DEFAULTS, add_body_options, non_negative_float, positive_int, quiet
@@ -85,15 +88,15 @@ def _names(allowed: tuple[str, ...]):
 def cmd_bench_accuracy(args: argparse.Namespace) -> int:
     """The tracker over the benchmark matrix: per cell and mode Δ, A(100), lost frames, facing."""
     from swarmpose.bench.accuracy import mean_over_seeds, run_matrix
-    from swarmpose.bench.accuracy_report import format_summary, format_table, plot_heatmap
+    from swarmpose.bench.accuracy_report import format_goals, format_summary, format_table, plot_heatmap
 
     tracker = {**_tracker_settings(args), "max_people": args.max_people}
     records = run_matrix(Path(args.out), subset=args.subset, detectors=args.detectors, modes=args.modes,
                          frames=args.frames, tracker=tracker, assets=args.assets, progress=not quiet(args),
-                         seeds=args.seeds)
+                         seeds=args.seeds, motions=args.motions)
     out = Path(args.out)
     merged = mean_over_seeds(records) if args.seeds > 1 else records
-    table = "\n\n".join([format_summary(merged), format_table(merged)]) + "\n"
+    table = "\n\n".join([format_summary(merged), format_table(merged), format_goals(merged)]) + "\n"
     (out / "table.md").write_text(table)
     (out / "records.json").write_text(json.dumps(records, indent=1))
     plot_heatmap(merged, out / "heatmap.png")
@@ -133,6 +136,44 @@ def cmd_bench_utdmhad(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_still(args: argparse.Namespace) -> int:
+    """Jitter of a person standing still and the lag when they move: unsmoothed, one-Euro, centred."""
+    from swarmpose.bench.still import run_still, summary
+    from swarmpose.bench.still_report import format_rows, format_summary
+
+    plan = StillPlan(clip=args.clip, at_s=args.at, hold_s=args.hold, moving_s=args.moving, settle_s=args.settle,
+                     body=args.body, shapes=args.shapes, yaws=args.yaws, detectors=args.detectors)
+    tracker = _tracker_settings(args, exclude=("smoothing",))
+    rows = run_still(Path(args.out), plan, tracker, assets=args.assets, progress=not quiet(args))
+    groups = summary(rows)
+    out = Path(args.out)
+    table = format_summary(groups) + "\n\n" + format_rows(rows) + "\n"
+    (out / "table.md").write_text(table)
+    (out / "records.json").write_text(json.dumps(rows, indent=1))
+    print(json.dumps({"out": str(out), "summary": groups, "rows": rows}) if args.json
+          else table + f"\nrecords.json and table.md in {out}")
+    return 0
+
+
+def _floats(text: str) -> tuple[float, ...]:
+    """An argparse type: comma-separated numbers."""
+    try:
+        values = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        values = ()
+    if not values:
+        raise argparse.ArgumentTypeError(f"{text!r}: give comma-separated numbers, e.g. 0,90")
+    return values
+
+
+def _words(text: str) -> tuple[str, ...]:
+    """An argparse type: comma-separated names."""
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not names:
+        raise argparse.ArgumentTypeError(f"{text!r}: give comma-separated names, e.g. male,female")
+    return names
+
+
 def cmd_bench_overlays(args: argparse.Namespace) -> int:
     """Overlay pictures of the tracker on the real Kinect frames without ground truth."""
     from swarmpose.bench.qualitative import write_overlays
@@ -150,15 +191,16 @@ def _add_assets(p: argparse.ArgumentParser) -> None:
                    help="shared assets folder (default: $SWARMPOSE_ASSETS or ../shared/assets)")
 
 
-def _tracker_settings(args: argparse.Namespace, extra: tuple[str, ...] = ()) -> dict:
+def _tracker_settings(args: argparse.Namespace, extra: tuple[str, ...] = (), exclude: tuple[str, ...] = ()) -> dict:
     """The values of the tracker settings a benchmark took as flags (:data:`BENCH_SETTINGS` and
-    ``extra``), over the environment, config file and :class:`TrackerConfig`'s defaults."""
+    ``extra``, less ``exclude``), over the environment, config file and :class:`TrackerConfig`'s defaults."""
     config = from_args(TrackerConfig, args)
-    return {name: getattr(config, name) for name in (*BENCH_SETTINGS, *extra)}
+    return {name: getattr(config, name) for name in (*BENCH_SETTINGS, *extra) if name not in exclude}
 
 
 def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
-    """Register ``bench score``, ``track``, ``detect``, ``accuracy``, ``utdmhad`` and ``overlays``."""
+    """Register ``bench score``, ``track``, ``live``, ``detect``, ``accuracy``, ``utdmhad``, ``still`` and
+    ``overlays``."""
     bench = sub.add_parser("bench", help="benchmarks").add_subparsers(dest="bench", required=True, metavar="BENCH")
     p = bench.add_parser("score", parents=[common], formatter_class=DEFAULTS,
                          help="OpenCL scorer vs the Open3D ray-casting baseline, hypotheses per second")
@@ -209,11 +251,16 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
     p.add_argument("--out", required=True, help="folder of the sequences, the per-cell results, table and heat map; "
                                                 "run again to resume")
     p.add_argument("--subset", choices=SUBSETS, default="full",
-                   help="full: 15 sequences x 3 detectors; regression: walk from the side and behind, MoveNet")
+                   help="full: 15 sequences x 3 detectors; regression: walk from the side and behind, MoveNet; "
+                        "hard: 6 hard motions x 5 views x MoveNet and BlazePose; hard-regression: the turning "
+                        "walk from the front, MoveNet")
     p.add_argument("--detectors", type=_names(tuple(DETECTORS)), default=None,
                    help=f"comma-separated subset of {', '.join(DETECTORS)} (default: the subset's)")
+    p.add_argument("--motions", type=_names((*MOTIONS, *HARD_MOTIONS)), default=None,
+                   help="comma-separated motions of the subset to run (default: all of them)")
     p.add_argument("--modes", type=_names(MODES), default=",".join(MODES), help="comma-separated tracker modes")
-    p.add_argument("--frames", type=positive_int, default=40, help="frames per sequence")
+    p.add_argument("--frames", type=positive_int, default=40,
+                   help="frames per sequence (a hard motion: the first N of its segment, at most all of it)")
     p.add_argument("--max-people", type=positive_int, default=1,
                    help="people tracked per frame (> 1: segmentation and a detection per person)")
     p.add_argument("--seeds", type=positive_int, default=1,
@@ -247,6 +294,31 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
     add_flags(p, TrackerConfig, (*BENCH_SETTINGS, "auto_height"))
     p.add_argument("--json", action="store_true", help="one JSON object with the summary and every record")
     p.set_defaults(func=cmd_bench_utdmhad)
+    p = bench.add_parser("still", parents=[common], formatter_class=DEFAULTS,
+                         help="jitter of a person standing still (a clip's frame held) and the lag when they move, "
+                              "unsmoothed, one-Euro and centred (resumable)")
+    defaults = StillPlan()
+    p.add_argument("--out", required=True, help="folder of the sequences, the records and the table; run again to "
+                                                "resume")
+    p.add_argument("--clip", default=defaults.clip, help="the clip whose frame is held: below the assets folder, a "
+                                                        "path, or builtin:NAME")
+    p.add_argument("--at", type=non_negative_float, default=defaults.at_s, help="seconds into the clip of the held "
+                                                                                "frame")
+    p.add_argument("--hold", type=non_negative_float, default=defaults.hold_s, help="seconds the frame is held")
+    p.add_argument("--moving", type=non_negative_float, default=defaults.moving_s,
+                   help="seconds of the clip going on after the hold (the lag needs 0.75)")
+    p.add_argument("--settle", type=non_negative_float, default=defaults.settle_s,
+                   help="seconds of the track's start left out of the still frames")
+    p.add_argument("--body", default=defaults.body, help="makehuman (the assets' MakeHuman body) or a body spec")
+    p.add_argument("--shapes", type=_words, default=",".join(defaults.shapes), help="comma-separated body shapes")
+    p.add_argument("--yaws", type=_floats, default=",".join(f"{y:g}" for y in defaults.yaws),
+                   help="comma-separated camera yaws, degrees (0: in front)")
+    p.add_argument("--detectors", type=_names(tuple(DETECTORS)), default=",".join(defaults.detectors),
+                   help=f"comma-separated subset of {', '.join(DETECTORS)}")
+    _add_assets(p)
+    add_flags(p, TrackerConfig, tuple(s for s in BENCH_SETTINGS if s != "smoothing"))
+    p.add_argument("--json", action="store_true", help="one JSON object with the summary and every row")
+    p.set_defaults(func=cmd_bench_still)
     p = bench.add_parser("overlays", parents=[common], formatter_class=DEFAULTS,
                          help="overlay pictures of the tracker on real Kinect frames without ground truth")
     p.add_argument("--out", default="docs/qualitative", help="folder of the pictures")

@@ -116,7 +116,9 @@ def add_synth_command(sub: argparse._SubParsersAction, common: argparse.Argument
     p.add_argument("--motion", default=None,
                    help="a BVH file (CMU, Mixamo, MakeHuman, Daz or CMU ASF joint names; FILE.bvh?map=names.toml "
                         "for your own naming, ?units=cm&up=z to state what is otherwise detected; "
-                        "docs/sources-and-detectors.md) or builtin:NAME (wave, squat, walk, turn, jumping_jacks)")
+                        "docs/sources-and-detectors.md) or builtin:NAME (wave, squat, walk, turn, jumping_jacks); "
+                        "either may end in ?hold=[AT:]SECONDS: the frame AT s in (default 0) held still, then the "
+                        "motion goes on")
     p.add_argument("--person", action="append", default=[], metavar="SPEC",
                    help="a person of a scene, repeatable: BODY:SHAPE:MOTION[@x,z[,yaw[,start]]] (README)")
     p.add_argument("--scene", default=None, metavar="FILE",

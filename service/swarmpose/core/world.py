@@ -26,9 +26,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from swarmpose.core.errors import ConfigError, ShapeError
+from swarmpose.core.rotations import matrix_to_quaternion, quaternion_multiply
 
 RIGID_TOLERANCE = 1e-3
 """A given rotation may differ from an orthonormal one (det +1) by this much per entry."""
@@ -109,9 +109,7 @@ def transform_poses(camera_to_world: np.ndarray, poses: np.ndarray) -> np.ndarra
     t = np.asarray(camera_to_world, dtype=np.float64)
     flat = h.reshape(-1, h.shape[-1])
     flat[:, 0:3] = transform_points(t, flat[:, 0:3])
-    turned = Rotation.from_matrix(t[:3, :3]) * Rotation.from_quat(flat[:, [4, 5, 6, 3]])
-    xyzw = turned.as_quat()
-    flat[:, 3:7] = xyzw[:, [3, 0, 1, 2]]
+    flat[:, 3:7] = quaternion_multiply(matrix_to_quaternion(t[:3, :3]), flat[:, 3:7])
     return flat.reshape(h.shape)
 
 

@@ -211,18 +211,24 @@ def _surfaces(frame: SurfaceFrame, background: np.ndarray | None = None) -> list
     return pieces
 
 
+def height_profile(heights: np.ndarray, bins: np.ndarray) -> np.ndarray:
+    """(n_bins + 2,) the highest of ``heights`` (N,) m in each of the bins ``bins`` (N,) (0 ..
+    n_bins - 1; the lowest height where a bin is empty), as a 3-bin mean with the edges repeated,
+    between two bins at the lowest height."""
+    low = float(heights.min())
+    profile = np.full(bins.max() + 1, low, dtype=np.float64)
+    np.maximum.at(profile, bins, heights)
+    edged = np.concatenate([profile[:1], profile, profile[-1:]])
+    return np.concatenate([[low], (edged[:-2] + edged[1:-1] + edged[2:]) / 3.0, [low]])
+
+
 def _head_axes(frame: SurfaceFrame, p: Coords) -> list[tuple[float, float]]:
     """Step 4: heads (across, along) m of a piece, most prominent first, from the maxima of
     its head-height profile standing ``head_dip_m`` above the dips beside them."""
-    from scipy.ndimage import maximum, uniform_filter1d
-
     c = frame.cfg
     start = float(p.across.min())
     bins = ((p.across - start) / c.profile_bin_m).astype(np.int64)
-    low = float(p.h.min())
-    profile = np.asarray(maximum(p.h, bins, np.arange(bins.max() + 1)), dtype=np.float64)
-    profile[np.bincount(bins) == 0] = low
-    padded = np.concatenate([[low], uniform_filter1d(profile, 3, mode="nearest"), [low]])
+    padded = height_profile(p.h, bins)
     distance = max(1, int(np.ceil(c.min_head_separation_m / c.profile_bin_m)))
     peaks, prominence = find_peaks(padded, c.head_dip_m, distance)
     if frame.floor is not None:  # a head top stands at a person's height

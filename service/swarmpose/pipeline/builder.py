@@ -83,7 +83,8 @@ def build_pipeline(driver: str, body: SkinnedBody, detector: Detector, tracker: 
                              1 if one_person else tracker.max_people, tracker.retire_frames,
                              personalise_frames=fitting_frames,
                              world=make_world(floor, coordinates) if seed == tracker.seed else None,
-                             backward=tracker.backward, centred_sigma_s=tracker.centred_sigma_s)
+                             backward=tracker.backward, centred_sigma_s=tracker.centred_sigma_s,
+                             box_hold=tracker.box_hold)
     if tracker.ensemble <= 1:
         return member(tracker.seed)
     from swarmpose.pipeline.ensemble import ensemble_of  # its imports (scipy.optimize) only for an ensemble

@@ -40,6 +40,7 @@ from swarmpose.detect.joints import Detector, Joints2D
 from swarmpose.detect.people import Segmentation, segment_people
 from swarmpose.detect.per_person import PersonDetection, detect_each
 from swarmpose.detect.props import PropMemory
+from swarmpose.detect.steady_boxes import SteadyBoxes
 from swarmpose.gpu.errors import DeviceError
 from swarmpose.people.people_tracker import PeopleTracker
 from swarmpose.pipeline.velocity import JointVelocities
@@ -118,13 +119,15 @@ class FramePipeline:
     backward: the offline backward pass's window in frames (:mod:`swarmpose.pipeline.backward`,
     run by :func:`swarmpose.pipeline.run.results`), 0: none; centred_sigma_s: σ (s) of the
     offline centred smoothing of the published poses (:mod:`swarmpose.pipeline.centred_smoothing`,
-    run there too), 0: none.
+    run there too), 0: none; box_hold: the share of its size a track's crop box may move and still
+    be held (:mod:`swarmpose.detect.steady_boxes`), 0: the box of the tracked joints every frame.
     ``detect`` and ``track`` may run in two threads (one each).
     """
 
     def __init__(self, detector: Detector, make_tracker: Callable[[Intrinsics, int], BodyTracker],
                  max_people: int, retire_frames: int = tracker_default("retire_frames"), personalise_frames: int = 0,
-                 world: WorldFrame | None = None, backward: int = 0, centred_sigma_s: float = 0.0):
+                 world: WorldFrame | None = None, backward: int = 0, centred_sigma_s: float = 0.0,
+                 box_hold: float = tracker_default("box_hold")):
         self.detector, self.make_tracker = detector, make_tracker
         self.backward, self.centred_sigma_s = int(backward), float(centred_sigma_s)
         self.on_step = None
@@ -137,6 +140,7 @@ class FramePipeline:
         self.intrinsics: Intrinsics | None = None
         self._box: np.ndarray | None = None
         self._boxes: list[np.ndarray] = []  # the last frame's tracked bodies' joint boxes (several people)
+        self._steady = SteadyBoxes(box_hold)  # each track's box, held while its joints stay put
         self._floor = FloorCache()
         self._props = PropMemory()
         self.velocities = JointVelocities()
@@ -259,7 +263,7 @@ class FramePipeline:
                 self.tracker.reset()
             return self._failed(frame, detection, exc, received_ns, t0)
         with self._box_lock:
-            self._box = body.joints_box()
+            self._box = self._steady.update({body.id: body.joints_box()}).get(body.id)
         timings = {**detection.timings_ms, **body.timings_ms}
         timings["total"] = detection.ms + body.timings_ms.get("total", 1000 * (time.perf_counter() - t0))
         return FrameResult(frame.index, frame.timestamp_ns, (body,), detection.note, timings, received_ns=received_ns)
@@ -288,10 +292,10 @@ class FramePipeline:
             if self.people is not None:
                 self.people.reset()
             return self._failed(frame, detection, exc, received_ns, t0)
-        boxes = [b.joints_box() for b in bodies if b.state != "lost"]
         with self._box_lock:
-            self._box = bodies[0].joints_box() if len(bodies) == 1 else None
-            self._boxes = [b for b in boxes if b is not None]
+            boxes = self._steady.update({b.id: b.joints_box() for b in bodies if b.state != "lost"})
+            self._box = boxes.get(bodies[0].id) if len(bodies) == 1 else None
+            self._boxes = list(boxes.values())
         timings: dict[str, float] = dict(detection.timings_ms)
         for body in bodies:  # each body's parts (start, search, launch, ...) summed over the people
             for key, ms in body.timings_ms.items():
@@ -313,6 +317,7 @@ class FramePipeline:
             raise exc
         with self._box_lock:
             self._box, self._boxes = None, []
+            self._steady.reset()
         reason = "; ".join(r for r in (detection.note, f"tracking failed: {describe_error(exc)}") if r)
         return FrameResult(frame.index, frame.timestamp_ns, (), reason,
                            {**detection.timings_ms, "total": detection.ms + 1000 * (time.perf_counter() - t0)},
@@ -334,6 +339,7 @@ class FramePipeline:
         self.velocities.reset()
         with self._box_lock:
             self._box, self._boxes = None, []
+            self._steady.reset()
 
 
 def skipped_result(item: SkippedFrame, received_ns: int = 0) -> FrameResult:

@@ -13,17 +13,16 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-import warnings
 from collections.abc import Callable
 from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from swarmpose.body.kinematics import forward_kinematics
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.errors import ConfigError, OutputError, ShapeError
+from swarmpose.core.rotations import zxy_euler_deg
 from swarmpose.core.world import check_rigid
 from swarmpose.publish.file_sink import FileSink, write_error
 from swarmpose.sources.base import Frame
@@ -231,9 +230,7 @@ class BvhSink(FileSink):
         local = np.empty_like(rot)
         local[0] = turn @ rot[0]
         local[1:] = np.swapaxes(rot[parents[1:]], -1, -2) @ rot[1:]
-        with warnings.catch_warnings():  # gimbal lock: scipy still returns angles giving the matrix
-            warnings.simplefilter("ignore", UserWarning)
-            euler = Rotation.from_matrix(local[self.order]).as_euler("ZXY", degrees=True)
+        euler = zxy_euler_deg(local[self.order])
         return np.concatenate([BVH_UNITS_PER_M * (turn @ pos[0] + shift), euler.ravel()])
 
     def _row(self, message: dict) -> str:

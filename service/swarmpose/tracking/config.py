@@ -44,6 +44,14 @@ class TrackerConfig:
     max_people: int = setting(6, "track up to this many people (1: one person, no segmentation)", minimum=1,
                               maximum=32, everyday=True)
     """Each person is found in the depth and detected on a crop of their own."""
+    box_hold: float = setting(0.0, "keep the 2D detector's crop box while the tracked joints' box moves less than "
+                                   "this share (0 = off)", minimum=0.0, maximum=0.5)
+    """Each edge may move this share of the box's larger side, once the box has stayed within it for
+    5 frames. A network's keypoints move when its crop does, and the crop follows the track: on a
+    person standing still, holding the box keeps that loop from feeding the track's jitter back
+    into it (:mod:`swarmpose.detect.steady_boxes`; 0.02 measured in BENCHMARKS.md). Off by default:
+    on moving sequences its effect was not shown to be nil (a fragile cell's flips, 5 of 12 seeds
+    against 3)."""
     retire_frames: int = setting(30, "frames a person may go unseen (occluded, crossing) before its id is retired",
                                  minimum=0)
     personalize: int = setting(0, "fit each person's body shape on their first N tracked frames, then lock it "

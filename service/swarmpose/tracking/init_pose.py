@@ -12,9 +12,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from swarmpose.body.kinematics import matrix_to_quaternion, quaternion_to_matrix
+from swarmpose.body.kinematics import axis_angle_matrix, matrix_to_quaternion, quaternion_to_matrix
 from swarmpose.body.skinned import SkinnedBody
 
 TORSO = ("left_hip", "right_hip", "left_shoulder", "right_shoulder")
@@ -110,7 +109,7 @@ def turned(body: SkinnedBody, pose: np.ndarray, degrees: float) -> np.ndarray:
         return h
     rotation = quaternion_to_matrix(h[3:7])
     up = rotation[:, 1]
-    turn = Rotation.from_rotvec(np.radians(degrees) * up / np.linalg.norm(up)).as_matrix()
+    turn = axis_angle_matrix(up / np.linalg.norm(up), np.radians(degrees))
     mid_before = body.posed_points(h[None], ("left_hip", "right_hip"))[0].mean(axis=0)
     q = matrix_to_quaternion(turn @ rotation)
     h[3:7] = q * np.sign(q @ h[3:7] + 1e-12)

@@ -13,12 +13,12 @@ perturbation of the perturbed PSO (paper §2.4).
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from swarmpose.body.kinematics import matrix_to_quaternion, quaternion_to_matrix
+from swarmpose.body.kinematics import matrix_to_quaternion, quaternion_to_matrix, rotation_power
 from swarmpose.body.skeleton import ANGLE_JOINT, ANGLE_LIMITS, ANGLES, JOINT_INDEX, POSE_DIM, ROOT_QUATERNION
 from swarmpose.body.skinned import SkinnedBody
 from swarmpose.core.camera import Intrinsics
+from swarmpose.core.rotations import rotvec_matrix
 from swarmpose.tracking.objective import JointTargets
 
 LIMB_GROUPS: tuple[tuple[str, ...], ...] = (
@@ -76,7 +76,7 @@ def spread(centre: np.ndarray, count: int, rng: np.random.Generator, t_radius: n
     clipped to the limits)."""
     x = np.repeat(centre[None], count, axis=0)
     x[:, :3] += rng.uniform(-1.0, 1.0, (count, 3)) * t_radius
-    turn = Rotation.from_rotvec(rng.uniform(-rot_radius, rot_radius, (count, 3))).as_matrix()
+    turn = rotvec_matrix(rng.uniform(-rot_radius, rot_radius, (count, 3)))
     rot = turn @ quaternion_to_matrix(centre[ROOT_QUATERNION])
     q = matrix_to_quaternion(rot)
     q *= np.sign(q @ centre[ROOT_QUATERNION] + 1e-12)[:, None]  # stay in the centre's hemisphere
@@ -122,8 +122,8 @@ def predicted_pose(previous: np.ndarray, before: np.ndarray, step_s: float, ahea
     out = previous.copy()
     out[:3] += ratio * (previous[:3] - before[:3])
     out[7:] = np.clip(previous[7:] + ratio * (previous[7:] - before[7:]), ANGLE_LIMITS[:, 0], ANGLE_LIMITS[:, 1])
-    now = Rotation.from_matrix(quaternion_to_matrix(previous[ROOT_QUATERNION]))
-    turn = now * Rotation.from_matrix(quaternion_to_matrix(before[ROOT_QUATERNION])).inv()
-    q = matrix_to_quaternion((Rotation.from_rotvec(ratio * turn.as_rotvec()) * now).as_matrix())
+    now = quaternion_to_matrix(previous[ROOT_QUATERNION])
+    turn = now @ quaternion_to_matrix(before[ROOT_QUATERNION]).T
+    q = matrix_to_quaternion(rotation_power(turn, ratio) @ now)
     out[ROOT_QUATERNION] = q * np.sign(q @ previous[ROOT_QUATERNION] + 1e-12)
     return out
