@@ -200,6 +200,8 @@ class FramePipeline:
             try:
                 reuse = self._floor.reusable(frame.intrinsics)
                 props = self._props.known(frame.depth, frame.intrinsics)
+                if props is not None:
+                    log.debug("frame %d: %d pixels of known props left out", frame.index, int(props.sum()))
                 segmentation = segment_people(frame.depth, frame.intrinsics, max_people=2 * self.max_people,
                                               floor=self._floor.plane if reuse else "auto", background=props)
                 self._floor.used(segmentation.floor, frame.intrinsics, fitted=not reuse)
