@@ -16,7 +16,7 @@ from conftest import MOCAP, needs_assets
 from swarmpose.cli.main import main
 from swarmpose.core.camera import Intrinsics, look_at
 from swarmpose.core.errors import ConfigError
-from swarmpose.sim.props import ALBEDOS, Prop, parse_prop_spec, place_props, stool_for
+from swarmpose.sim.props import ALBEDOS, Prop, parse_prop_spec, place_props, placed_spec, stool_for
 from swarmpose.sim.render import AMBIENT, Renderer, Room
 
 INTR = Intrinsics(160, 120, 130.0, 130.0, 79.5, 59.5)
@@ -140,6 +140,12 @@ def test_a_stool_under_a_squat_and_a_table_hiding_the_legs(tmp_path):
     body_scene.add_triangles(o3d.core.Tensor(body.pose(placed.poses[low:low + 1], "dqs")[0].astype(np.float32)),
                              o3d.core.Tensor(body.triangles.astype(np.uint32)))
     assert body_scene.compute_distance(o3d.core.Tensor(grid)).numpy().min() < 0.01
+    # Placed again where it stands (the benchmark's stool, placed over more frames than it films):
+    # the same stool over any frames, even the first alone, where nobody sits.
+    eye = np.array([0.0, 1.2, 3.0])
+    assert place_props([placed_spec(stool)], [body], [placed.poses[:1]], [placed.rotations[:1]], eye) == (stool,)
+    with pytest.raises(ConfigError, match="never sits"):
+        place_props([parse_prop_spec("stool")], [body], [placed.poses[:1]], [placed.rotations[:1]], eye)
 
     out = tmp_path / "squat"
     assert main(["synth", "--body", "builtin", "--motion", "builtin:squat", "--fps", "15", "--frames", "24",

@@ -77,8 +77,9 @@ counter-clockwise seen from outside)."""
 @dataclass(frozen=True)
 class PropSpec:
     """One prop as asked for: kind (``stool``, ``table`` or ``box``), the person (1-based) an
-    automatic one is placed for, a box's x, z, width, depth, height (m) and yaw (degrees), and
-    the text it was read from."""
+    automatic one is placed for, a box's x, z, width, depth, height (m) and yaw (degrees) (also
+    set on a stool or table placed before, :func:`placed_spec`: it then stands there), and the
+    text it was read from."""
 
     kind: str
     person: int = 1
@@ -135,6 +136,13 @@ class Prop:
                 "camera": {"centre_m": np.round(world_to_camera @ (centre - eye), 6).tolist(),
                            "axes": np.round((world_to_camera @ self.rotation).T, 6).tolist(),
                            "corners_m": np.round((self.corners() - eye) @ world_to_camera.T, 6).tolist()}}
+
+
+def placed_spec(prop: Prop) -> PropSpec:
+    """The spec that puts ``prop`` (world frame) back where it stands, its kind (and colour) kept: for
+    a stool or table placed over more frames than are filmed (the benchmark places a clip segment's
+    stool over the whole segment, whatever part of it a run renders)."""
+    return PropSpec(prop.kind, 1, (prop.x, prop.z, prop.width, prop.depth, prop.height, prop.yaw_deg), prop.spec)
 
 
 def parse_prop_spec(text: str, where: str = "--prop") -> PropSpec:
@@ -250,9 +258,9 @@ def place_props(specs: Sequence[PropSpec], bodies: Sequence[SkinnedBody], poses:
     ConfigError names a spec that asks for a person the scene does not have."""
     props = []
     for spec in specs:
-        if spec.kind == "box":
+        if spec.box is not None:  # a box, or a stool or table placed before (placed_spec)
             x, z, w, d, h, yaw = spec.box
-            props.append(Prop("box", x, z, w, d, h, yaw, spec.text))
+            props.append(Prop(spec.kind, x, z, w, d, h, yaw, spec.text))
             continue
         if spec.person > len(bodies):
             raise ConfigError(f"--prop {spec.text!r} is for person {spec.person}, but the scene has "
