@@ -4,6 +4,8 @@ sequence turned so that the subject faces the camera of yaw 0 and stays in view.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from conftest import ASSETS, needs_assets
@@ -55,15 +57,39 @@ def test_unknown_subset_and_motion_name_the_choices(capsys):
     assert "turning-walk" in capsys.readouterr().err
 
 
-def test_props_wait_for_a_synth_that_places_them():
+def test_sit_stand_is_filmed_with_its_stool_and_bad_props_name_the_sequence():
     from dataclasses import replace
 
     from swarmpose.bench.accuracy import synth_config
 
-    seq = replace(sequences("hard")[5], props=("stool",))
-    assert seq.name.endswith("-stool"), "a sequence with a prop is rendered apart from one without"
-    with pytest.raises(ConfigError, match="stool"):
-        synth_config(seq, 10)
+    sit = [s for s in sequences("hard") if s.motion == "sit-stand"]
+    assert len(sit) == len(YAWS) and all(s.props == ("stool",) and s.name.endswith("-stool") for s in sit)
+    assert all(s.props == () for s in sequences("hard") if s.motion != "sit-stand")
+    (stool,) = synth_config(sit[0], 10).props
+    assert (stool.kind, stool.person, stool.box) == ("stool", 1, None)
+    bad = replace(sit[0], props=("bench",))
+    with pytest.raises(ConfigError, match=re.escape(f"sequence {bad.name}: prop 'bench': unknown prop")):
+        synth_config(bad, 10)
+
+
+@pytest.mark.slow
+@needs_assets
+def test_the_stool_stands_where_the_whole_segment_sits_whatever_is_filmed(tmp_path):
+    """The benchmark's stool is placed over the whole segment, not over the frames filmed (in the
+    first frames nobody sits yet, and synth would refuse a stool placed there): the same stool for
+    1 and 3 frames filmed, as high as a low stool's seat."""
+    import json
+
+    from swarmpose.bench.accuracy import make_sequence
+
+    seq = [s for s in sequences("hard") if s.motion == "sit-stand"][0]
+    stools = []
+    for frames in (1, 3):
+        folder = make_sequence(seq, tmp_path / f"{seq.name}-{frames}", frames, ASSETS)
+        (stool,) = json.loads((folder / "sequence.json").read_text())["props"]
+        stools.append(stool)
+    assert stools[0] == stools[1] and stools[0]["kind"] == "stool"
+    assert 0.15 < stools[0]["world"]["size_m"][1] < 0.6
 
 
 @needs_assets

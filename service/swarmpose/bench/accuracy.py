@@ -54,8 +54,9 @@ from swarmpose.pipeline.config import ServiceConfig
 from swarmpose.pipeline.run import RunSummary, results
 from swarmpose.pipeline.service import open_parts
 from swarmpose.sim.evaluate import facing_errors_deg, joint_errors, summarise
+from swarmpose.sim.props import parse_prop_spec, placed_spec
 from swarmpose.sim.scene import PersonSpec, load_people
-from swarmpose.sim.synth import SynthConfig, synthesize, synthesize_people
+from swarmpose.sim.synth import SynthConfig, place_scene, synthesize, synthesize_people
 from swarmpose.sim.visibility import hidden_joints, split_errors_mm
 from swarmpose.sources.base import Frame
 from swarmpose.tracking.config import TrackerConfig
@@ -94,24 +95,27 @@ def make_sequence(seq: Sequence, folder: Path, frames: int, assets: Path) -> Pat
 
 
 def synth_config(seq: Sequence, frames: int) -> SynthConfig:
-    """How ``seq`` is filmed: ``frames`` frames at 30 fps from its camera."""
-    if seq.props:  # once synth places props: SynthConfig(..., props=tuple(parse_prop_spec(p) for p in seq.props))
-        raise ConfigError(f"sequence {seq.name}: props {', '.join(seq.props)} cannot be rendered yet (synth places "
-                          "no props); leave the motion's props empty")
+    """How ``seq`` is filmed: ``frames`` frames at 30 fps from its camera, with its props
+    (``synth --prop`` specs, :func:`swarmpose.sim.props.parse_prop_spec`)."""
+    props = tuple(parse_prop_spec(p, f"sequence {seq.name}: prop") for p in seq.props)
     return SynthConfig(frames=frames, fps=FPS, camera_yaw_deg=float(seq.yaw_deg), camera_height=seq.camera_height,
-                       camera_distance=seq.camera_distance)
+                       camera_distance=seq.camera_distance, props=props)
 
 
 def film_segment(seq: Sequence, out: Path, config: SynthConfig, assets: Path) -> None:
     """Render ``seq``'s hard motion into ``out``: its clip from the segment's start (the scene
     spec's ``start``), turned about the vertical (its ``yaw``) so that the pelvis faces the
-    camera of yaw 0 at the first frame."""
+    camera of yaw 0 at the first frame. Its props (a stool) are placed over the whole segment, so
+    that they stand where the subject sits whatever part of it is filmed."""
     clip = HARD_MOTIONS[seq.motion]
     spec = PersonSpec(f"makehuman:{assets}/bodies/makehuman", seq.shape, str(assets / clip.clip), start_s=clip.start_s)
-    person = load_people([spec], config.frames, config.fps)[0]
+    person = load_people([spec], clip.frames if config.props else config.frames, config.fps)[0]
     forward = person.motion.root_rotation[0][:, 2]  # the pelvis's forward axis in the clip's world frame
     facing = float(np.degrees(np.arctan2(forward[0], forward[2])))
     person = replace(person, spec=replace(spec, yaw_deg=-facing))
+    if config.props:
+        whole = place_scene([person], replace(config, frames=clip.frames))
+        config = replace(config, props=tuple(placed_spec(prop) for prop in whole.props))
     synthesize_people([person], out, config, progress=False,
                       description={"benchmark": asdict(seq), "segment": {**asdict(clip), "turned_deg": -facing}})
 

@@ -10,8 +10,9 @@ motion         clip                                             segment    what 
 turning-walk   ``cmu_06_10_dribble_walk_left_turns.bvh``        2.0–7.6    four 90° left turns on the spot while
                                                                            dribbling: the pelvis turns through 365°
 sit-stand      ``cmu_14_31_sit_stepstool_standup.bvh``          1.2–8.0    backs onto a low stool, seated by 2.4 s,
-                                                                           stands up 7.0–7.9 s (rendered without the
-                                                                           stool until synth places props)
+                                                                           stands up 7.0–7.9 s (the stool rendered:
+                                                                           ``synth --prop stool``, placed over the
+                                                                           whole segment)
 run            ``cmu_09_01_run.bvh``                            0.1–0.6    running at 3.6 m/s (1.8 m; the clip is 1.2 s)
 pick-up        ``cmu_02_06_bend_scoop_pickup.bvh``              0.5–2.1    bends to the floor, scoops with the right
                                                                            hand, straightens up
@@ -45,7 +46,7 @@ FPS = 30.0
 class HardMotion:
     """A clip below the shared assets folder, the segment that holds the hard motion (start and
     length, seconds of the clip), whether the subject travels far (then the far placement) and
-    the props of the scene (``synth --prop`` specs; none can be rendered yet)."""
+    the props of the scene (``synth --prop`` specs)."""
 
     clip: str
     start_s: float
@@ -61,7 +62,7 @@ class HardMotion:
 
 HARD_MOTIONS: dict[str, HardMotion] = {
     "turning-walk": HardMotion("mocap/cmu_06_10_dribble_walk_left_turns.bvh", 2.0, 5.6),
-    "sit-stand": HardMotion("mocap/cmu_14_31_sit_stepstool_standup.bvh", 1.2, 6.8),
+    "sit-stand": HardMotion("mocap/cmu_14_31_sit_stepstool_standup.bvh", 1.2, 6.8, props=("stool",)),
     "run": HardMotion("mocap/cmu_09_01_run.bvh", 0.1, 0.5, travels=True),
     "pick-up": HardMotion("mocap/cmu_02_06_bend_scoop_pickup.bvh", 0.5, 1.6),
     "soccer-kick": HardMotion("mocap/cmu_10_01_soccer_kick.bvh", 4.3, 1.3, travels=True),

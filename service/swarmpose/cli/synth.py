@@ -2,7 +2,8 @@
 
 ``synth`` films one person (``--body``, ``--shape``, ``--motion``) or a scene of several
 (``--person BODY:SHAPE:MOTION[@x,z[,yaw]]`` repeated, or ``--scene FILE``; see
-:mod:`swarmpose.sim.scene`).
+:mod:`swarmpose.sim.scene`), with props in the room (``--prop stool|table|box:...``, repeated, or a
+scene file's ``props``; see :mod:`swarmpose.sim.props`).
 """
 
 from __future__ import annotations
@@ -25,13 +26,17 @@ def cmd_synth(args: argparse.Namespace) -> int:
     """Render a synthetic RGBD sequence with ground truth."""
     from swarmpose.body.loader import load_body
     from swarmpose.motion.library import load_motion_spec
-    from swarmpose.sim.scene import load_people
+    from swarmpose.sim.props import parse_prop_spec
+    from swarmpose.sim.scene import load_people, read_scene_file
     from swarmpose.sim.synth import SynthConfig, synthesize, synthesize_people
 
+    props = [parse_prop_spec(text) for text in args.prop]
+    if args.scene:
+        props += read_scene_file(Path(args.scene))[1]
     config = SynthConfig(frames=args.frames, fps=args.fps, seed=args.seed, camera_distance=args.camera_distance,
                          camera_yaw_deg=args.camera_yaw, camera_height=args.camera_height,
                          layout=args.layout, skinning=args.skinning,
-                         clothes=args.clothes)
+                         clothes=args.clothes, props=tuple(props))
     config.validate()
     specs = scene_specs(args)
     if specs is not None:
@@ -74,6 +79,11 @@ def print_synth_summary(summary: dict, body: SkinnedBody) -> None:
         print(f"wrote {summary['frames']} frames of {summary['motion']} on {summary['body']} "
               f"(height {body.height:.2f} m) to {summary['out']}")
     print("  color/*.png depth/*.png (uint16 mm) intrinsic.json groundtruth.jsonl sequence.json")
+    for prop in summary.get("props", ()):
+        w, h, d = prop["world"]["size_m"]
+        x, _, z = prop["world"]["centre_floor_m"]
+        print(f"  {prop['kind']} ({prop['spec']}): {w:.2f} x {d:.2f} m, {h:.2f} m high, at x={x:.2f} m, z={z:.2f} m, "
+              f"yaw {prop['world']['yaw_deg']:.0f} deg")
     if depth:
         print(f"  {'people' if people else 'person'} depth range: {depth[0]:.2f}..{depth[1]:.2f} m")
     for person in people or ():
@@ -112,7 +122,13 @@ def add_synth_command(sub: argparse._SubParsersAction, common: argparse.Argument
     p.add_argument("--person", action="append", default=[], metavar="SPEC",
                    help="a person of a scene, repeatable: BODY:SHAPE:MOTION[@x,z[,yaw[,start]]] (README)")
     p.add_argument("--scene", default=None, metavar="FILE",
-                   help="a JSON list of people {body, shape, motion, x, z, yaw, start} instead of --person")
+                   help="a JSON list of people {body, shape, motion, x, z, yaw, start} instead of --person, or "
+                        '{"people": [...], "props": ["stool", ...]}')
+    p.add_argument("--prop", action="append", default=[], metavar="SPEC",
+                   help="a box in the room, repeatable: stool (under the person where the hips are lowest, as "
+                        "high as the seat), table (0.75 m high, between the camera and the person, hiding the "
+                        "legs), stool:K / table:K for person K, or box:x,z,w,d,h[,yaw] (footprint centre, width, "
+                        "depth, height in m, world frame; yaw in degrees)")
     p.add_argument("--frames", type=positive_int, required=True, help="number of frames to write")
     p.add_argument("--out", required=True, help="output folder (created)")
     p.add_argument("--seed", type=int, default=0, help="seed of the depth noise and the simulated detector")

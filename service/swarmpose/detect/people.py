@@ -66,11 +66,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmpose.core.camera import Intrinsics
-from swarmpose.core.errors import ConfigError
+from swarmpose.core.errors import ConfigError, check_shape
 from swarmpose.detect.depth_surfaces import Coords, PeopleTuning, Piece, SurfaceFrame, supported_top
 from swarmpose.detect.floor import FloorPlane, check_depth, fit_floor
 from swarmpose.detect.peaks import find_peaks
 from swarmpose.detect.person_masks import attach_fragments, finish_mask
+from swarmpose.detect.props import props_beside
 
 BORDER_PX = 2
 """A mask this close (px) to the edge of the image, or of a blank band along it, touches it."""
@@ -124,13 +125,16 @@ class Segmentation:
     right by box centre; labels: (H, W) int32, 0 = nobody, k = people[k - 1]; rejected: how
     many candidate surfaces were turned down, by reason (``too_small``, ``too_narrow``,
     ``too_wide``, ``too_short``, ``too_tall``, ``too_low``, ``too_high``, ``flat``, ``in_gap``,
-    ``beyond_max_people``); specks under ``noise_area_m2`` are not counted.
+    ``beyond_max_people``); specks under ``noise_area_m2`` are not counted; props: (H, W) bool, the
+    pixels of rejected surfaces that are props beside a person (:func:`swarmpose.detect.props.props_beside`),
+    None when there are none.
     """
 
     floor: FloorPlane | None
     people: tuple[PersonSegment, ...]
     labels: np.ndarray
     rejected: dict[str, int]
+    props: np.ndarray | None = None
 
     def as_dict(self) -> dict:
         """JSON-friendly summary (without masks and labels)."""
@@ -178,13 +182,16 @@ def _in_gap(frame: SurfaceFrame, piece: Piece, backgrounds: list[Piece]) -> bool
     return False
 
 
-def _surfaces(frame: SurfaceFrame) -> list[Piece]:
+def _surfaces(frame: SurfaceFrame, background: np.ndarray | None = None) -> list[Piece]:
     """Steps 1-2: connected surfaces of the foreground whose neighbours differ by less than a
-    depth step; pieces under ``noise_area_m2`` are dropped uncounted."""
+    depth step; pieces under ``noise_area_m2`` are dropped uncounted. ``background`` (H, W)
+    bool: pixels left out of the foreground (known props)."""
     import cv2
 
     c, z = frame.cfg, frame.depth
     fg = (z > c.min_depth_m) & (z < c.max_depth_m)
+    if background is not None:
+        fg &= ~background
     if frame.floor is not None:
         fg &= z * frame.height > np.float32(c.floor_clearance_m - frame.height_offset)
     nearest = cv2.erode(np.where(fg, z, np.float32(np.inf)), np.ones((3, 3), np.uint8),
@@ -315,13 +322,15 @@ def _resolve_floor(floor, depth: np.ndarray, intrinsics: Intrinsics) -> FloorPla
 
 
 def segment_people(depth_m: np.ndarray, intrinsics: Intrinsics, *, floor: FloorPlane | None | str = "auto",
-                   max_people: int = 6, **tuning) -> Segmentation:
+                   max_people: int = 6, background: np.ndarray | None = None, **tuning) -> Segmentation:
     """The people in one depth frame (see the module docstring for the method and its limits).
 
     depth_m: (H, W) metres, 0 or NaN = no measurement, registered to ``intrinsics``;
     floor: ``"auto"`` to fit it (:func:`fit_floor`), a :class:`FloorPlane` found before (a
     fixed camera: saves ~10 ms a frame), or None to work without one; max_people: at most this
-    many people are kept, the largest by frontal area; tuning: overrides of
+    many people are kept, the largest by frontal area; background: (H, W) bool pixels that are
+    no one's, left out as the floor is (the props a :class:`~swarmpose.detect.props.PropMemory`
+    knows), None: none; tuning: overrides of
     :class:`PeopleTuning` fields. Raises ShapeError for a depth that is not
     (intrinsics.height, intrinsics.width) and ConfigError for a bad argument; a frame with
     nobody in it (empty, a wall, only floor) gives no people.
@@ -336,7 +345,9 @@ def segment_people(depth_m: np.ndarray, intrinsics: Intrinsics, *, floor: FloorP
         return Segmentation(floor, (), labels, {})
     frame = SurfaceFrame(depth, intrinsics, floor, cfg)
     people, rejected = [], []
-    for surface in _surfaces(frame):
+    if background is not None:
+        check_shape("background", background, depth.shape)
+    for surface in _surfaces(frame, background):
         frame.judge(surface)
         splittable = (surface.reason in (None, "too_wide") and surface.stats["width"] >= 2 * cfg.min_width_m
                       and surface.stats["area_m2"] >= (1 + cfg.min_part_share) * cfg.min_area_m2)
@@ -348,14 +359,16 @@ def segment_people(depth_m: np.ndarray, intrinsics: Intrinsics, *, floor: FloorP
         people.remove(piece)
         rejected.append(piece)
     reasons: dict[str, int] = {}
-    for piece in attach_fragments(frame, people, rejected):
+    rejected = attach_fragments(frame, people, rejected)
+    for piece in rejected:
         reasons[piece.reason] = reasons.get(piece.reason, 0) + 1
     if len(people) > max_people:
         people.sort(key=lambda p: -p.stats["area_m2"])
         reasons["beyond_max_people"] = len(people) - max_people
         people = people[:max_people]
     people.sort(key=lambda p: p.stats["centroid"][2])  # nearest first: occluders claim shared pixels
-    taken = np.zeros(depth.shape, bool)  # every person's own pixels first, then what each adds
+    # every person's own pixels first, then what each adds; never the background
+    taken = np.zeros(depth.shape, bool) if background is None else background.copy()
     for piece in people:
         taken[piece.box[1]:piece.box[3], piece.box[0]:piece.box[2]] |= piece.mask
     sensor = _sensor_area(depth)
@@ -367,7 +380,7 @@ def segment_people(depth_m: np.ndarray, intrinsics: Intrinsics, *, floor: FloorP
     segments.sort(key=lambda s: 0.5 * (s.box[0] + s.box[2]))
     for k, s in enumerate(segments, start=1):
         labels[s.mask] = k
-    return Segmentation(floor, tuple(segments), labels, reasons)
+    return Segmentation(floor, tuple(segments), labels, reasons, props_beside(frame, rejected, people))
 
 
 __all__ = ["PeopleTuning", "PersonSegment", "Segmentation", "segment_people"]

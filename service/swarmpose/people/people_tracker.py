@@ -10,8 +10,10 @@ each one's 2D joints (:func:`swarmpose.detect.per_person.detect_each`):
 2. **Each matched track** runs its own PSO on the frame with *the other people's pixels
    removed from the depth* (set to 0, no measurement): a person in front of this one then
    neither pulls its model forward nor counts against the model's hidden parts, since the
-   depth term skips pixels without a measurement (paper Eq. 2). A track whose fit is lost
-   keeps its id: its tracker restarts from the detection on the next frame.
+   depth term skips pixels without a measurement (paper Eq. 2). The props beside people
+   (:mod:`swarmpose.detect.props`: a table, a stool) are removed from every fit's depth the same
+   way. A track whose fit is lost keeps its id: its tracker restarts from the detection on the
+   next frame.
 3. **New people** (segments no track took), largest first, get a new track while fewer than
    ``max_people`` are tracked; the id is given only when the first fit finds a person. A
    segment whose detection has no torso at the tracker's ``min_score`` is tried once more on
@@ -138,6 +140,7 @@ class PeopleTracker:
         self._spare: list[BodyTracker] = []  # trackers of retired or refused tracks, reused (no new scorer)
         self.budget_ms = 0.0  # each person's share of a frame's time (ms, live); 0: the configured search
         self._last_index: int | None = None  # the frame tracked before this one
+        self._props: np.ndarray | None = None  # this frame's props (H, W) bool, left out of every fit's depth
         self.live = False  # frames may be dropped between two tracked ones (serve): the gate widens for them
 
     @property
@@ -178,13 +181,16 @@ class PeopleTracker:
             return tracker
         return self.make_tracker(body_id)
 
-    def step(self, frame: Frame, people: Sequence[PersonDetection], labels: np.ndarray | None = None
-             ) -> tuple[BodyResult, ...]:
+    def step(self, frame: Frame, people: Sequence[PersonDetection], labels: np.ndarray | None = None,
+             props: np.ndarray | None = None) -> tuple[BodyResult, ...]:
         """The bodies of ``frame``: one per person tracked in it, by id.
 
         people: each person's segment and 2D joints (segment None: one whole-frame detection);
-        labels: (H, W) int the segmentation's person labels (k = ``people[k-1]``), None without.
+        labels: (H, W) int the segmentation's person labels (k = ``people[k-1]``), None without;
+        props: (H, W) bool pixels of props beside people (:mod:`swarmpose.detect.props`), left out
+        of every person's depth, None: none.
         A track whose fit throws restarts (its id stays); the other people go on."""
+        self._props = props
         centres = [self._centre(p) for p in people]
         looks = [colour_histogram(frame.color, p.segment.mask) if p.segment is not None else None for p in people]
         results: dict[int, BodyResult] = {}
@@ -231,11 +237,15 @@ class PeopleTracker:
     def _fit(self, tracker: BodyTracker, frame: Frame, seen: Frame, joints,
              start_min_score: float | None = None) -> BodyResult | None:
         """One person's tracker on ``seen`` (``frame``, or a copy with other people's depth
-        removed); None (and the tracker restarted) when it throws. start_min_score: as
-        :meth:`BodyTracker.step` takes it."""
+        removed) less this frame's props' depth; None (and the tracker restarted) when it throws.
+        start_min_score: as :meth:`BodyTracker.step` takes it. The props do not make the frame one
+        with others removed (its lost test's looser 2D rule is for people hidden by people)."""
         tracker.budget_ms = self.budget_ms
+        others_removed = seen is not frame
+        if self._props is not None:
+            seen = _depth_removed(seen, self._props)
         try:
-            return tracker.step(seen, joints, others_removed=seen is not frame, start_min_score=start_min_score)
+            return tracker.step(seen, joints, others_removed=others_removed, start_min_score=start_min_score)
         except Exception as exc:  # one person's failure must not cost the others their fit
             log.warning("frame %d: tracking person %d failed (%s: %s); it restarts", frame.index, tracker.body_id,
                         type(exc).__name__, exc)

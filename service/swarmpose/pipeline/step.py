@@ -39,6 +39,7 @@ from swarmpose.detect.floor import FloorPlane
 from swarmpose.detect.joints import Detector, Joints2D
 from swarmpose.detect.people import Segmentation, segment_people
 from swarmpose.detect.per_person import PersonDetection, detect_each
+from swarmpose.detect.props import PropMemory
 from swarmpose.detect.steady_boxes import SteadyBoxes
 from swarmpose.gpu.errors import DeviceError
 from swarmpose.people.people_tracker import PeopleTracker
@@ -60,8 +61,10 @@ EMPTY_DEPTH = "the depth image has no valid pixels (every one 0: no measurement)
 class Detection:
     """The first half's answer for one frame: joints (None: none), a note when the detector
     failed, and the detection time (ms, the segmentation's ``segment_ms`` included). With several
-    people: ``people`` (each person's segment and joints; None in single-person mode) and the
-    ``segmentation`` they came from (None when it found nobody and the whole frame was detected)."""
+    people: ``people`` (each person's segment and joints; None in single-person mode), the
+    ``segmentation`` they came from (None when it found nobody and the whole frame was detected)
+    and ``props``: (H, W) bool pixels of the props beside people that the pipeline's memory knows
+    and sees again (:mod:`swarmpose.detect.props`), left out of every person's depth; None: none."""
 
     joints: Joints2D | None
     note: str = ""
@@ -69,6 +72,7 @@ class Detection:
     people: tuple[PersonDetection, ...] | None = None
     segmentation: Segmentation | None = None
     segment_ms: float = 0.0
+    props: np.ndarray | None = None
 
     @property
     def timings_ms(self) -> dict[str, float]:
@@ -138,6 +142,7 @@ class FramePipeline:
         self._boxes: list[np.ndarray] = []  # the last frame's tracked bodies' joint boxes (several people)
         self._steady = SteadyBoxes(box_hold)  # each track's box, held while its joints stay put
         self._floor = FloorCache()
+        self._props = PropMemory()
         self.velocities = JointVelocities()
         self.frame_period_s: float | None = None
         """The camera's frame period (s), given to every tracker (live: frames dropped widen the search)."""
@@ -190,13 +195,18 @@ class FramePipeline:
     def _detect(self, frame: Frame) -> Detection:
         """:meth:`detect` without the floor of the world frame."""
         t0 = time.perf_counter()
-        segmentation, segment_ms = None, 0.0
+        segmentation, segment_ms, props = None, 0.0, None
         if self.max_people > 1:
             try:
                 reuse = self._floor.reusable(frame.intrinsics)
+                props = self._props.known(frame.depth, frame.intrinsics)
+                if props is not None:
+                    log.debug("frame %d: %d pixels of known props left out", frame.index, int(props.sum()))
                 segmentation = segment_people(frame.depth, frame.intrinsics, max_people=2 * self.max_people,
-                                              floor=self._floor.plane if reuse else "auto")
+                                              floor=self._floor.plane if reuse else "auto", background=props)
                 self._floor.used(segmentation.floor, frame.intrinsics, fitted=not reuse)
+                if segmentation.people:  # a frame with nobody says nothing of what stands beside someone
+                    self._props.learn(frame.depth, frame.intrinsics, segmentation.props)
             except Exception as exc:  # a segmentation that throws: the frame is detected as a whole
                 log.debug("frame %d: segmentation failed: %s", frame.index, exc_message(exc))
             segment_ms = 1000 * (time.perf_counter() - t0)
@@ -211,7 +221,7 @@ class FramePipeline:
             else:
                 note = "; ".join(p.note for p in people if p.note)
                 return Detection(people[0].joints, note, 1000 * (time.perf_counter() - t0), people, segmentation,
-                                 segment_ms)
+                                 segment_ms, props)
         with self._box_lock:
             box = self._box
         try:
@@ -226,7 +236,7 @@ class FramePipeline:
                 log.warning("frame %d: %s; check the depth stream (units, registration to colour); such frames "
                             "are tracked as having nobody in view", frame.index, EMPTY_DEPTH)
         people = (PersonDetection(None, joints, note),) if self.max_people > 1 else None
-        return Detection(joints, note, 1000 * (time.perf_counter() - t0), people, segmentation, segment_ms)
+        return Detection(joints, note, 1000 * (time.perf_counter() - t0), people, segmentation, segment_ms, props)
 
     def track(self, frame: Frame, detection: Detection, received_ns: int = 0) -> FrameResult:
         """The bodies of ``frame`` given its detection; never raises for a frame it cannot track.
@@ -279,7 +289,7 @@ class FramePipeline:
             labels = None if detection.segmentation is None else detection.segmentation.labels
             self.people.budget_ms = self.budget_ms / max(len(detection.people), 1)
             self.people.live = self.frame_period_s is not None
-            bodies = self.people.step(frame, detection.people, labels)
+            bodies = self.people.step(frame, detection.people, labels, detection.props)
         except Exception as exc:  # a frame that fails to track (not one person's fit): every track restarts
             if self.people is not None:
                 self.people.reset()
@@ -323,12 +333,14 @@ class FramePipeline:
         return self.track(item, self.detect(item), received_ns)
 
     def reset(self) -> None:
-        """Forget the tracks, the bodies fitted to their people and the detector's box."""
+        """Forget the tracks, the bodies fitted to their people, the detector's box and the props seen
+        (a camera that came back may stand elsewhere)."""
         if self.tracker is not None:
             self.tracker.new_person()
         if self.people is not None:
             self.people.reset()
         self.velocities.reset()
+        self._props = PropMemory()
         with self._box_lock:
             self._box, self._boxes = None, []
             self._steady.reset()

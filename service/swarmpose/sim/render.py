@@ -4,7 +4,8 @@ This renderer is deliberately independent of the OpenCL scorer's rasterizer, so 
 checks the other. Everything is in the camera frame (OpenCV axes, metres); depth is the
 z coordinate of the first hit (0 = no hit), colour a Lambert-shaded RGB image. Several
 people are cast together so they occlude each other; a label image says whose surface
-each pixel shows.
+each pixel shows. The room may hold props (boxes: a stool, a table, :mod:`swarmpose.sim.props`),
+cast with everything else, in their own colour, labelled as no person.
 """
 
 from __future__ import annotations
@@ -35,12 +36,23 @@ AMBIENT = 0.3
 
 
 @dataclass(frozen=True)
+class Solid:
+    """A static object of the room (a prop): vertices (V, 3) m in the camera frame, triangles
+    (F, 3) and its albedo (3,) RGB 0..1."""
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    albedo: np.ndarray
+
+
+@dataclass(frozen=True)
 class Room:
-    """A floor and a back wall, as triangle meshes in the camera frame.
+    """A floor and a back wall, as triangle meshes in the camera frame, and the props in it.
 
     floor_point / floor_normal: a point on the floor plane and its upward unit normal;
     wall_point / wall_normal: the same for the wall facing the camera. ``checker`` is the
-    floor's checkerboard square size in metres (0 = plain).
+    floor's checkerboard square size in metres (0 = plain). ``props``: solids standing in the
+    room (labelled -1, -2, ... in :meth:`Renderer.render_people`'s label image).
     """
 
     floor_point: np.ndarray
@@ -49,6 +61,7 @@ class Room:
     wall_normal: np.ndarray
     checker: float = 0.5
     extent: float = 30.0
+    props: tuple[Solid, ...] = ()
 
     def meshes(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """(vertices (4, 3), triangles (2, 3)) for the floor and the wall."""
@@ -103,7 +116,8 @@ class Renderer:
         albedo in 0..1, (3,) for the whole body or (F, 3) per triangle (clothes,
         :mod:`swarmpose.sim.clothing`); default :func:`person_albedo`. Returns depth (H, W) float32 m
         (0 = nothing hit), colour (H, W, 3) uint8 RGB and labels (H, W) int32: k where person
-        k (1-based, in ``meshes`` order) is the first surface hit, 0 for the room or nothing.
+        k (1-based, in ``meshes`` order) is the first surface hit, -m where the room's prop m
+        (1-based, in ``room.props`` order) is, 0 for the floor, the wall or nothing.
         """
         o3d = self._o3d
         scene = o3d.t.geometry.RaycastingScene()
@@ -112,8 +126,9 @@ class Renderer:
                       for v, f in meshes]
         ids = []
         if room is not None:
-            for verts, tris in room.meshes():
-                ids.append(scene.add_triangles(o3d.core.Tensor(verts.astype(np.float32)), o3d.core.Tensor(tris)))
+            for verts, tris in room.meshes() + [(p.vertices, p.triangles) for p in room.props]:
+                ids.append(scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(verts, dtype=np.float32)),
+                                               o3d.core.Tensor(np.ascontiguousarray(tris, dtype=np.uint32))))
         hit = scene.cast_rays(self._rays)
         t = hit["t_hit"].numpy()
         geom = hit["geometry_ids"].numpy()
@@ -149,6 +164,10 @@ class Renderer:
                 else:
                     parity = np.zeros(len(rel))
                 albedo[floor] = np.where(parity[:, None] > 0, FLOOR_ALBEDO[1], FLOOR_ALBEDO[0])
+            for m, prop in enumerate(room.props, 1):
+                solid = valid & (geom == ids[1 + m])
+                labels[solid] = -m
+                albedo[solid] = prop.albedo
         colour = np.clip(albedo * shade[..., None] * 255.0, 0, 255).astype(np.uint8)
         return depth, colour, labels
 

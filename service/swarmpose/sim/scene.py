@@ -17,7 +17,8 @@ A person is given on the command line as ``--person BODY:SHAPE:MOTION[@x,z[,yaw[
 
 A scene file (``--scene FILE``) is a JSON list of objects with keys ``body``, ``shape``,
 ``motion`` (required), ``x``, ``z``, ``yaw`` (degrees) and ``start`` (seconds), the same
-fields without parsing.
+fields without parsing; or an object ``{"people": [that list], "props": ["stool", ...]}``
+whose props are written as ``--prop`` takes them (:mod:`swarmpose.sim.props`).
 
 World frame (as :mod:`swarmpose.motion.sequence`): X = a person's left at the first frame
 when yaw = 0, Y = up, Z = forward, floor at y = 0. The camera stands ``camera_distance``
@@ -46,6 +47,7 @@ from swarmpose.core.camera import look_at
 from swarmpose.core.errors import ConfigError, SwarmposeError
 from swarmpose.motion.library import load_motion_spec
 from swarmpose.motion.sequence import Motion
+from swarmpose.sim.props import PROP_HELP, PropSpec, parse_prop_spec
 from swarmpose.sim.render import PERSON_ALBEDOS, Room
 
 MAX_PEOPLE = len(PERSON_ALBEDOS)
@@ -113,6 +115,13 @@ def parse_person_spec(text: str) -> PersonSpec:
 def load_scene_file(path: Path) -> list[PersonSpec]:
     """A scene file (JSON list of {body, shape, motion, x, z, yaw, start}) -> its people; ConfigError
     names the file and the entry."""
+    return read_scene_file(path)[0]
+
+
+def read_scene_file(path: Path) -> tuple[list[PersonSpec], list[PropSpec]]:
+    """A scene file -> its people and props: a JSON list of people {body, shape, motion, x, z, yaw,
+    start}, or an object {"people": [that list], "props": [prop specs as --prop takes them]};
+    ConfigError names the file and the entry."""
     path = Path(path).expanduser()
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
@@ -122,6 +131,17 @@ def load_scene_file(path: Path) -> list[PersonSpec]:
     except ValueError as exc:
         raise ConfigError(f"--scene {path}: not JSON ({exc}); write a list of "
                           '{"body", "shape", "motion", "x", "z", "yaw", "start"} objects') from None
+    props = []
+    if isinstance(data, dict):
+        unknown = set(data) - {"people", "props"}
+        if unknown:
+            raise ConfigError(f"--scene {path}: unknown keys {sorted(unknown)}; a scene object holds 'people' "
+                              "and 'props'")
+        extra = data.get("props", [])
+        if not isinstance(extra, list):
+            raise ConfigError(f"--scene {path}: 'props' must be a list of prop specs; {PROP_HELP}")
+        props = [parse_prop_spec(text, f"--scene {path}, prop {k}") for k, text in enumerate(extra, 1)]
+        data = data.get("people")
     if not isinstance(data, list) or not data:
         raise ConfigError(f"--scene {path}: expected a non-empty JSON list of people, got {type(data).__name__}")
     people = []
@@ -146,7 +166,7 @@ def load_scene_file(path: Path) -> list[PersonSpec]:
         people.append(_checked(PersonSpec(entry.get("body") or "builtin", entry.get("shape") or None,
                                           entry["motion"], numbers["x"], numbers["z"], numbers["yaw"],
                                           numbers["start"]), where))
-    return people
+    return people, props
 
 
 def _checked(spec: PersonSpec, where: str) -> PersonSpec:
@@ -212,14 +232,15 @@ def load_people(specs: Sequence[PersonSpec], frames: int, fps: float) -> list[Sc
 @dataclass(frozen=True)
 class SceneFilming:
     """poses: per person (N, 36) camera-frame poses; rotation: world -> camera (3, 3); eye: (3,)
-    world m; room: floor and wall in the camera frame; starts: (P, 3) world root positions at
-    the first frame."""
+    world m; room: floor, wall and props in the camera frame; starts: (P, 3) world root positions
+    at the first frame; props: the props in the world frame (:class:`swarmpose.sim.props.Prop`)."""
 
     poses: tuple[np.ndarray, ...]
     rotation: np.ndarray
     eye: np.ndarray
     room: Room
     starts: np.ndarray
+    props: tuple = ()
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,9 @@ Output folder (Open3D's RGBD layout plus ground truth)::
                              joints, detections of the simulated 2D detector (person 1's);
                              with several people also ``people``, see below
     sequence.json            how it was made: body, shape, motion, camera, noise, seed
-                             (and ``people``: body, shape, motion, x, z, yaw of each)
+                             (and ``people``: body, shape, motion, x, z, yaw of each;
+                             ``props``: each prop's kind, spec, place and size in the world
+                             and its centre, axes and corners in the camera frame)
 
 One person (:func:`synthesize`, or :func:`synthesize_people` with one person) writes no
 ``people`` in ``groundtruth.jsonl``: the file is the single-person format, byte for byte.
@@ -22,7 +24,11 @@ person 1's top-level fields (old readers see person 1) and adds ``people``: per 
 ``id``, ``pose``, ``joints3d``, ``joints2d``, ``detections`` (keypoints hidden by another
 person are missing), ``visible`` (share of the person's silhouette not hidden by others,
 0..1), ``box`` ([x0, y0, x1, y1] px, inclusive, of its visible pixels, or null) and
-``occluded`` (the evaluation joints hidden by another person).
+``occluded`` (the evaluation joints hidden by another person or a prop).
+
+Props (``SynthConfig.props``, :mod:`swarmpose.sim.props`: a stool, a table, a box) are rendered
+with the room in their own colour; they hide joints from the simulated detector as another
+person does, and a single-person file with props adds the top-level ``occluded``.
 
 World frame while placing things: X = the subject's left at the first frame, Y = up,
 Z = forward, floor at y = 0. The camera stands ``camera_distance`` in front of the
@@ -35,7 +41,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +56,7 @@ from swarmpose.detect.simulated import SimulatedNoise, person_size, simulate_det
 from swarmpose.motion.sequence import Motion
 from swarmpose.sim.clothing import clothing_albedo, shirt_albedo
 from swarmpose.sim.depth_noise import KinectNoise
+from swarmpose.sim.props import PropSpec, place_props
 from swarmpose.sim.render import Renderer, Room
 from swarmpose.sim.scene import PersonSpec, SceneFilming, ScenePerson, check_scene, place_in_world, place_people
 
@@ -60,8 +67,9 @@ lies more than this (m) in front of it."""
 
 @dataclass(frozen=True)
 class SynthConfig:
-    """How to film: frames, rate (Hz), camera (m, degrees), noise, detector, skinning, seed, and
-    whether the bodies wear clothes (:mod:`swarmpose.sim.clothing`) or one colour each."""
+    """How to film: frames, rate (Hz), camera (m, degrees), noise, detector, skinning, seed,
+    whether the bodies wear clothes (:mod:`swarmpose.sim.clothing`) or one colour each, and the
+    props in the room (:mod:`swarmpose.sim.props`)."""
 
     frames: int = 60
     fps: float = 30.0
@@ -75,6 +83,7 @@ class SynthConfig:
     layout: str = "coco17"
     skinning: str = "dqs"
     clothes: bool = False
+    props: tuple[PropSpec, ...] = ()
 
     def validate(self) -> None:
         """Raise ConfigError for values no camera or sequence can have."""
@@ -115,17 +124,23 @@ def place_scene(people: Sequence[ScenePerson], config: SynthConfig) -> SceneFilm
     their poses in its frame."""
     placed = [place_in_world(p.body, p.motion, config.frames, p.spec.x, p.spec.z, p.spec.yaw_deg, config.skinning)
               for p in people]
-    return place_people(placed, config.camera_distance, config.camera_yaw_deg, config.camera_height)
+    film = place_people(placed, config.camera_distance, config.camera_yaw_deg, config.camera_height)
+    if not config.props:
+        return film
+    props = place_props(config.props, [p.body for p in placed], [p.poses for p in placed],
+                        [p.rotations for p in placed], film.eye, config.skinning)
+    room = replace(film.room, props=tuple(prop.solid(film.rotation, film.eye) for prop in props))
+    return replace(film, room=room, props=props)
 
 
 def occluded_points(points3d: np.ndarray, points2d: np.ndarray, depth: np.ndarray, labels: np.ndarray,
                     person: int, margin: float = OCCLUSION_MARGIN) -> np.ndarray:
-    """(N,) bool: points hidden by *another* person.
+    """(N,) bool: points hidden by *another* person or a prop.
 
     points3d (N, 3) camera frame m and points2d (N, 2) px of person ``person`` (1-based id);
-    depth (H, W) m and labels (H, W) (0 = nobody, k = person k) of the noise-free render. A
-    point is hidden when its nearest pixel shows another person whose surface lies more than
-    ``margin`` m in front of it; points outside the image or behind the camera are not (the
+    depth (H, W) m and labels (H, W) (0 = nobody, k = person k, -m = prop m) of the noise-free
+    render. A point is hidden when its nearest pixel shows another person or a prop whose surface
+    lies more than ``margin`` m in front of it; points outside the image or behind the camera are not (the
     detector drops those anyway), nor are points behind the person's own body.
     """
     h, w = labels.shape
@@ -215,11 +230,14 @@ def _render(out: Path, people: list[ScenePerson], config: SynthConfig, descripti
     if scene:
         meta["people"] = [{"id": k, **p.spec.as_dict(), "body_name": p.body.name, "motion_name": p.motion.name,
                            "height_m": round(p.body.height, 4)} for k, p in enumerate(people, 1)]
+    if film.props:
+        meta["props"] = [prop.as_dict(film.rotation, film.eye) for prop in film.props]
     (out / "sequence.json").write_text(json.dumps(meta, indent=2))
 
     albedos = ([clothing_albedo(p.body, shirt_albedo(k), k) for k, p in enumerate(people)] if config.clothes
                else None)  # None: each person in one colour
     several = len(people) > 1
+    hiders = several or bool(film.props)  # anything that can hide a person's joints from the detector
     depth_range = [np.inf, -np.inf]
     visible_sum = np.zeros(len(people))
     with open(out / "groundtruth.jsonl", "w", encoding="utf-8") as gt, \
@@ -237,7 +255,7 @@ def _render(out: Path, people: list[ScenePerson], config: SynthConfig, descripti
             cv2.imwrite(str(out / "depth" / name), np.round(noisy * 1000.0).astype(np.uint16))
             truths = []
             for k, (p, t) in enumerate(zip(people, transforms)):
-                truth = _person_truth(p.body, film.poses[k][i], t, k, i, depth, labels, intr, layout, config, several)
+                truth = _person_truth(p.body, film.poses[k][i], t, k, i, depth, labels, intr, layout, config, hiders)
                 if several:
                     truth["visible"], truth["box"] = visible_share(labels, k + 1, renderer.silhouette(*meshes[k]))
                     visible_sum[k] += truth["visible"]
@@ -247,6 +265,8 @@ def _render(out: Path, people: list[ScenePerson], config: SynthConfig, descripti
                       **{key: truths[0][key] for key in ("pose", "joints3d", "joints2d", "detections")}}
             if several:
                 record["people"] = [{"id": k, **truth} for k, truth in enumerate(truths, 1)]
+            elif hiders:
+                record["occluded"] = truths[0]["occluded"]
             gt.write(json.dumps(record, allow_nan=False) + "\n")
             gt.flush()
             bar.update(1)
@@ -254,6 +274,8 @@ def _render(out: Path, people: list[ScenePerson], config: SynthConfig, descripti
                "person_depth_m": depth_range if np.isfinite(depth_range[0]) else None,
                "config": {k: v for k, v in asdict(config).items() if k in ("fps", "seed", "camera_distance",
                                                                              "camera_yaw_deg", "camera_height")}}
+    if film.props:
+        summary["props"] = meta["props"]
     if scene:
         summary["people"] = [{"id": k, "body": p.body.name, "height_m": p.body.height, "motion": p.motion.name,
                               "x": p.spec.x, "z": p.spec.z, "yaw": p.spec.yaw_deg,
@@ -264,14 +286,14 @@ def _render(out: Path, people: list[ScenePerson], config: SynthConfig, descripti
 
 def _person_truth(body: SkinnedBody, pose: np.ndarray, transforms: np.ndarray, index: int, frame: int,
                   depth: np.ndarray, labels: np.ndarray, intr: Intrinsics, layout, config: SynthConfig,
-                  several: bool) -> dict:
+                  hiders: bool) -> dict:
     """One person's ground truth of one frame: pose, evaluation joints 3D / 2D, simulated
-    detections (points hidden by another person missing) and, with several people, the
-    evaluation joints so hidden."""
+    detections (points hidden by another person or a prop missing) and, when the scene has
+    several people or props (``hiders``), the evaluation joints so hidden."""
     by_name = {p: k for k, p in enumerate(body.point_names)}
     pts3 = transform_points(body.point_bones, body.point_rest, transforms)[0]
     pts2 = intr.project(pts3)
-    hidden = occluded_points(pts3, pts2, depth, labels, index + 1) if several else np.zeros(len(pts3), bool)
+    hidden = occluded_points(pts3, pts2, depth, labels, index + 1) if hiders else np.zeros(len(pts3), bool)
     depth_ok = {p: bool(pts3[k, 2] > 0) and not hidden[k] for p, k in by_name.items()}
     det = simulate_detections(layout, {p: pts2[k] for p, k in by_name.items()}, depth_ok, person_size(pts2),
                               intr, config.detector, config.seed, frame, stream=index)
@@ -281,6 +303,6 @@ def _person_truth(body: SkinnedBody, pose: np.ndarray, transforms: np.ndarray, i
         "joints2d": {j: pts2[by_name[j]].round(3).tolist() for j in EVAL_JOINTS},
         "detections": {"layout": layout.name, "keypoints": det},
     }
-    if several:
+    if hiders:
         truth["occluded"] = [j for j in EVAL_JOINTS if hidden[by_name[j]]]
     return truth
