@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from swarmpose.bench.store import read_record, tracker_settings, write_record
+import pytest
+
+from swarmpose.bench.store import read_record, render_whole, tracker_settings, write_record
 
 
 def test_a_record_is_read_back_only_with_its_own_settings(tmp_path):
@@ -145,3 +147,27 @@ def test_records_without_smoothing_resume_runs_without_it_and_lift_never_gets_it
     assert read_record(old, tracker_settings({"smoothing": "centred"})) is None
     assert mode_settings(tracker_settings({"smoothing": "centred"}), "lift")["smoothing"] == "off"
     assert mode_settings(tracker_settings({"smoothing": "centred"}), "hybrid")["smoothing"] == "centred"
+
+
+def test_a_sequence_is_rendered_whole_or_not_at_all(tmp_path):
+    folder = tmp_path / "seq"
+    folder.mkdir()
+    (folder / "old.txt").write_text("too short")
+
+    def interrupted(tmp):
+        tmp.mkdir()
+        (tmp / "half.txt").write_text("half")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        render_whole(folder, interrupted)
+    assert (folder / "old.txt").exists(), "an interrupted render leaves what was there"
+
+    def complete(tmp):
+        assert not tmp.exists(), "the interrupted run's partial folder is thrown away first"
+        tmp.mkdir()
+        (tmp / "new.txt").write_text("whole")
+
+    assert render_whole(folder, complete) == folder
+    assert sorted(p.name for p in folder.iterdir()) == ["new.txt"]
+    assert not (tmp_path / "seq.partial").exists()

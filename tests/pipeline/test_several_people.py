@@ -14,7 +14,7 @@ from swarmpose.body.loader import load_body
 from swarmpose.detect.people import segment_people
 from swarmpose.detect.per_person import MASK_GREY, PersonDetection, masked_colour
 from swarmpose.detect.simulated import SimulatedDetector
-from swarmpose.people.people_tracker import PeopleTracker
+from swarmpose.people.people_tracker import PeopleTracker, _depth_removed
 from swarmpose.pipeline.step import FramePipeline
 from swarmpose.pipeline.worker import Worker
 from swarmpose.sim.people_metrics import TruePerson, score_people
@@ -91,7 +91,7 @@ def test_other_people_are_painted_grey_for_the_detector_and_removed_from_the_dep
     assert np.all(painted[others] == MASK_GREY)
     assert np.array_equal(painted[seg.labels <= 1], frame.color[seg.labels <= 1])
     person = PersonDetection(seg.people[0], None)
-    masked = PeopleTracker._frame_for(frame, seg.labels, 0, person)
+    masked = _depth_removed(frame, PeopleTracker._others(seg.labels, 0, person))
     assert np.all(masked.depth[others] == 0)
     keep = ~others
     assert np.array_equal(masked.depth[keep], frame.depth[keep])

@@ -10,6 +10,7 @@ from swarmpose.body.loader import load_body
 from swarmpose.cli.main import main
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError
+from swarmpose.sim.evaluate import joint_errors
 from swarmpose.sim.visibility import HIDDEN_MARGIN_M, hidden_joints, split_errors_mm
 from swarmpose.sources.registry import open_source
 
@@ -42,8 +43,8 @@ def test_bad_shapes_are_named():
         hidden_joints(np.zeros((10, 10)), CAMERA, np.zeros((2, 3)))
     with pytest.raises(ConfigError, match=r"\(J, 3\)"):
         hidden_joints(np.zeros((120, 160)), CAMERA, np.zeros((2, 2)))
-    with pytest.raises(ConfigError, match="must be"):
-        split_errors_mm(np.zeros((2, 3, 3)), np.zeros((2, 3, 3)), np.zeros((2, 2), bool))
+    with pytest.raises(ConfigError, match="must both be"):
+        split_errors_mm(joint_errors(np.zeros((2, 3, 3)), np.zeros((2, 3, 3))), np.zeros((2, 2), bool))
 
 
 def test_the_split_averages_each_side_by_hand():
@@ -52,11 +53,11 @@ def test_the_split_averages_each_side_by_hand():
     estimates[0, :, 0] = [0.01, 0.02, 0.09]  # frame 0: 10, 20 mm visible; 90 mm hidden
     estimates[1] = np.nan  # a lost frame counts for neither
     hidden = np.array([[False, False, True], [True, True, True]])
-    split = split_errors_mm(estimates, truth, hidden)
+    split = split_errors_mm(joint_errors(estimates, truth), hidden)
     assert split["visible_mm"] == pytest.approx(15.0)
     assert split["hidden_mm"] == pytest.approx(90.0)
     assert split["hidden_share"] == pytest.approx(1 / 3)
-    assert split_errors_mm(estimates, truth, np.zeros((2, 3), bool))["hidden_mm"] is None
+    assert split_errors_mm(joint_errors(estimates, truth), np.zeros((2, 3), bool))["hidden_mm"] is None
 
 
 @pytest.fixture(scope="module")

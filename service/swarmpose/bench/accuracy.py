@@ -30,7 +30,6 @@ seed, so a per-cell goal is judged on the mean over seeds (:func:`mean_over_seed
 from __future__ import annotations
 
 import logging
-import shutil
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass, replace
 from functools import lru_cache, partial
@@ -42,7 +41,7 @@ from swarmpose.bench.detect import find_assets
 from swarmpose.bench.flip_metrics import flip_metrics
 from swarmpose.bench.hard_motions import FPS, HARD_MOTIONS, segment_frames
 from swarmpose.bench.matrix import DETECTORS, MODES, MOTIONS, Cell, Sequence, cells
-from swarmpose.bench.store import mode_settings, read_record, seeded, tracker_settings, write_record
+from swarmpose.bench.store import mode_settings, read_record, render_whole, seeded, tracker_settings, write_record
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import EVAL_JOINTS, POSE_DIM
 from swarmpose.core.camera import Intrinsics
@@ -81,17 +80,16 @@ def make_sequence(seq: Sequence, folder: Path, frames: int, assets: Path) -> Pat
     if gt.exists() and sum(1 for _ in gt.open()) >= frames:
         return folder
     config = synth_config(seq, frames)
-    tmp = folder.with_name(folder.name + ".partial")
-    shutil.rmtree(tmp, ignore_errors=True)  # left by an interrupted run
-    if seq.motion in HARD_MOTIONS:
-        film_segment(seq, tmp, config, assets)
-    else:
-        body = subject(str(assets), seq.shape)
-        motion = load_motion_spec(str(assets / MOTIONS[seq.motion]), body, frames, FPS)
-        synthesize(body, motion, tmp, config, description={"benchmark": asdict(seq)}, progress=False)
-    shutil.rmtree(folder, ignore_errors=True)  # too short for this run's --frames
-    tmp.rename(folder)
-    return folder
+
+    def render(tmp: Path) -> None:
+        if seq.motion in HARD_MOTIONS:
+            film_segment(seq, tmp, config, assets)
+        else:
+            body = subject(str(assets), seq.shape)
+            motion = load_motion_spec(str(assets / MOTIONS[seq.motion]), body, frames, FPS)
+            synthesize(body, motion, tmp, config, description={"benchmark": asdict(seq)}, progress=False)
+
+    return render_whole(folder, render)
 
 
 def synth_config(seq: Sequence, frames: int) -> SynthConfig:
@@ -207,7 +205,8 @@ def track_with_truth(config: ServiceConfig, frames: int = 0) -> TrackedRun:
 
 def scores(run: TrackedRun) -> dict:
     """Δ, A(100), lost frames, torso facing and the detector's 2D errors of a tracked run (the module doc's fields)."""
-    score = summarise(joint_errors(run.estimates, run.truth))
+    errors = joint_errors(run.estimates, run.truth)
+    score = summarise(errors)
     facing = facing_errors_deg(run.estimates, run.truth)
     known = np.isfinite(facing)
     truth2d = run.intrinsics.project(run.truth.reshape(-1, 3)).reshape(*run.truth.shape[:2], 2)
@@ -217,7 +216,7 @@ def scores(run: TrackedRun) -> dict:
             "facing_ok": float(np.mean(facing[known] <= FACING_OK_DEG)) if known.any() else 0.0,
             "detector_px": px, "swapped": swapped, "fps": run.summary.fps,
             **flip_metrics(run.estimates, run.truth, run.times_s),
-            **(split_errors_mm(run.estimates, run.truth, run.hidden) if run.hidden is not None else {})}
+            **(split_errors_mm(errors, run.hidden) if run.hidden is not None else {})}
 
 
 def track_cell(cell: Cell, mode: str, folder: Path, assets: Path, tracker: dict, frames: int = 0) -> dict:

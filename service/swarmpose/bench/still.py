@@ -25,7 +25,6 @@ resumes, and a record made with other settings is made again.
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +33,7 @@ from swarmpose.bench.accuracy import TrackedRun, track_with_truth
 from swarmpose.bench.detect import find_assets
 from swarmpose.bench.matrix import DETECTORS
 from swarmpose.bench.still_plan import RUNS, SMOOTHINGS, StillPlan
-from swarmpose.bench.store import read_record, tracker_settings, write_record
+from swarmpose.bench.store import read_record, render_whole, tracker_settings, write_record
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.core.progress import progress_bar
@@ -59,13 +58,9 @@ def make_still_sequence(plan: StillPlan, shape: str, yaw: float, folder: Path, r
     body = load_body(body_spec(plan, root), shape)
     clip = plan.clip if plan.clip.startswith("builtin:") or root is None else str(root / plan.clip)
     motion = load_motion_spec(f"{clip}?hold={plan.at_s:g}:{plan.hold_s:g}", body, plan.frames, plan.fps)
-    tmp = folder.with_name(folder.name + ".partial")
-    shutil.rmtree(tmp, ignore_errors=True)
-    synthesize(body, motion, tmp, SynthConfig(frames=plan.frames, fps=plan.fps, camera_yaw_deg=float(yaw)),
-               description=description, progress=False)
-    shutil.rmtree(folder, ignore_errors=True)
-    tmp.rename(folder)
-    return folder
+    config = SynthConfig(frames=plan.frames, fps=plan.fps, camera_yaw_deg=float(yaw))
+    return render_whole(folder, lambda tmp: synthesize(body, motion, tmp, config, description=description,
+                                                       progress=False))
 
 
 def body_spec(plan: StillPlan, root: Path | None) -> str:

@@ -1,11 +1,13 @@
-"""The per-run records of the resumable benchmarks (``bench accuracy``, ``bench utdmhad``): one
-JSON file per run, written whole or not at all, and read back only when it was made with the
-same settings."""
+"""The per-run records of the resumable benchmarks (``bench accuracy``, ``bench utdmhad``, ``bench
+still``): one JSON file per run, written whole or not at all, and read back only when it was made
+with the same settings; and their sequences, rendered whole or not at all (:func:`render_whole`)."""
 
 from __future__ import annotations
 
 import json
 import os
+import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 from swarmpose.tracking.config import TrackerConfig
@@ -71,3 +73,15 @@ def write_record(path: Path, record: dict) -> None:
     tmp = Path(path).with_suffix(".tmp")
     tmp.write_text(json.dumps(record))
     os.replace(tmp, path)
+
+
+def render_whole(folder: Path, render: Callable[[Path], None]) -> Path:
+    """``folder`` as ``render`` (called with an empty folder to fill) makes it: rendered beside it as
+    ``FOLDER.partial`` (one an interrupted run left is thrown away), then put in its place, so that an
+    interrupted run never leaves a half-rendered sequence where a complete one is looked for."""
+    tmp = folder.with_name(folder.name + ".partial")
+    shutil.rmtree(tmp, ignore_errors=True)
+    render(tmp)
+    shutil.rmtree(folder, ignore_errors=True)  # one made for other settings (too short, another plan)
+    tmp.rename(folder)
+    return folder

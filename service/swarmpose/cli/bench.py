@@ -74,13 +74,14 @@ def cmd_bench_detect(args: argparse.Namespace) -> int:
     return 0
 
 
-def _names(allowed: tuple[str, ...]):
-    """An argparse type: comma-separated names out of ``allowed``."""
+def _names(allowed: tuple[str, ...] | None = None):
+    """An argparse type: comma-separated names out of ``allowed`` (None: any names)."""
     def parse(text: str) -> tuple[str, ...]:
         names = tuple(n.strip() for n in text.split(",") if n.strip())
-        bad = [n for n in names if n not in allowed]
+        bad = [n for n in names if allowed is not None and n not in allowed]
         if bad or not names:
-            raise argparse.ArgumentTypeError(f"{text!r}: choose from {', '.join(allowed)} (comma-separated)")
+            hint = f"choose from {', '.join(allowed)}" if allowed is not None else "give names, e.g. male,female"
+            raise argparse.ArgumentTypeError(f"{text!r}: {hint} (comma-separated)")
         return names
     return parse
 
@@ -164,14 +165,6 @@ def _floats(text: str) -> tuple[float, ...]:
     if not values:
         raise argparse.ArgumentTypeError(f"{text!r}: give comma-separated numbers, e.g. 0,90")
     return values
-
-
-def _words(text: str) -> tuple[str, ...]:
-    """An argparse type: comma-separated names."""
-    names = tuple(n.strip() for n in text.split(",") if n.strip())
-    if not names:
-        raise argparse.ArgumentTypeError(f"{text!r}: give comma-separated names, e.g. male,female")
-    return names
 
 
 def cmd_bench_overlays(args: argparse.Namespace) -> int:
@@ -310,7 +303,7 @@ def add_bench_commands(sub: argparse._SubParsersAction, common: argparse.Argumen
     p.add_argument("--settle", type=non_negative_float, default=defaults.settle_s,
                    help="seconds of the track's start left out of the still frames")
     p.add_argument("--body", default=defaults.body, help="makehuman (the assets' MakeHuman body) or a body spec")
-    p.add_argument("--shapes", type=_words, default=",".join(defaults.shapes), help="comma-separated body shapes")
+    p.add_argument("--shapes", type=_names(), default=",".join(defaults.shapes), help="comma-separated body shapes")
     p.add_argument("--yaws", type=_floats, default=",".join(f"{y:g}" for y in defaults.yaws),
                    help="comma-separated camera yaws, degrees (0: in front)")
     p.add_argument("--detectors", type=_names(tuple(DETECTORS)), default=",".join(defaults.detectors),

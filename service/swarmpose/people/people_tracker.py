@@ -198,7 +198,7 @@ class PeopleTracker:
         self._last_index = frame.index
         for t, o in assignment.pairs:
             track = self.tracks[t]
-            body = self._fit(track.tracker, frame, self._frame_for(frame, labels, o, people[o]), people[o].joints)
+            body = self._fit(track.tracker, frame, self._others(labels, o, people[o]), people[o].joints)
             if body is not None:
                 results[track.id] = body
             track.seen(self._observed_centre(centres[o], body), looks[o], frame.index)
@@ -208,7 +208,7 @@ class PeopleTracker:
                 self.counts.beyond_max_people += 1
                 continue
             tracker = self._tracker(self._next_id)
-            body = self._fit(tracker, frame, self._frame_for(frame, labels, o, people[o]), people[o].joints)
+            body = self._fit(tracker, frame, self._others(labels, o, people[o]), people[o].joints)
             if body is not None and body.reason == NO_TORSO and None not in (people[o].segment, people[o].joints):
                 body = self._retry_start(tracker, frame, people[o])
             if body is None or body.state == "lost":  # no person in its detection: no id for it
@@ -228,22 +228,24 @@ class PeopleTracker:
             if track.missed > self.retire_frames:
                 self._retire(track)
             elif track.missed <= COAST_FRAMES and track.tracker.previous is not None:
-                body = self._fit(track.tracker, frame, self._without_people(frame, labels), None)
+                body = self._fit(track.tracker, frame, self._everyone(labels), None)
                 if body is not None and body.state != "lost":
                     results[track.id] = replace(body, reason=COASTING)
                     track.centre, track.velocity = self._fit_centre(body, track.centre), np.zeros(3)
         return tuple(results[i] for i in sorted(results))
 
-    def _fit(self, tracker: BodyTracker, frame: Frame, seen: Frame, joints,
+    def _fit(self, tracker: BodyTracker, frame: Frame, removed: np.ndarray | None, joints,
              start_min_score: float | None = None) -> BodyResult | None:
-        """One person's tracker on ``seen`` (``frame``, or a copy with other people's depth
-        removed) less this frame's props' depth; None (and the tracker restarted) when it throws.
-        start_min_score: as :meth:`BodyTracker.step` takes it. The props do not make the frame one
-        with others removed (its lost test's looser 2D rule is for people hidden by people)."""
+        """One person's tracker on ``frame`` with the depth of other people (``removed``, (H, W) bool;
+        None: nobody else) and of this frame's props set to no measurement, in one copy; None (and the
+        tracker restarted) when it throws. start_min_score: as :meth:`BodyTracker.step` takes it. The
+        props do not make the frame one with others removed (its lost test's looser 2D rule is for
+        people hidden by people)."""
         tracker.budget_ms = self.budget_ms
-        others_removed = seen is not frame
+        others_removed = removed is not None
         if self._props is not None:
-            seen = _depth_removed(seen, self._props)
+            removed = self._props if removed is None else removed | self._props
+        seen = frame if removed is None else _depth_removed(frame, removed)
         try:
             return tracker.step(seen, joints, others_removed=others_removed, start_min_score=start_min_score)
         except Exception as exc:  # one person's failure must not cost the others their fit
@@ -304,29 +306,27 @@ class PeopleTracker:
         return 0 if person.segment is None else int(person.segment.pixels)
 
     @staticmethod
-    def _without_people(frame: Frame, labels: np.ndarray | None) -> Frame:
-        """``frame`` with every segmented person's depth removed (0): what is left of a person
-        the segmentation did not find (mostly hidden) is background to the others."""
+    def _everyone(labels: np.ndarray | None) -> np.ndarray | None:
+        """(H, W) bool: every segmented person's pixels, None when there are none: what is left of a
+        person the segmentation did not find (mostly hidden) is background to the others."""
         if labels is None or not np.any(labels):
-            return frame
-        return _depth_removed(frame, labels != 0)
+            return None
+        return labels != 0
 
     def _retry_start(self, tracker: BodyTracker, frame: Frame, person: PersonDetection) -> BodyResult | None:
         """A new person's second start when the first found no torso: on the depth of its segment
         alone (where a weak keypoint lifts, it lifts onto this person), the keypoints down to
         :data:`START_MIN_SCORE` (or the tracker's ``min_score`` if lower)."""
-        seen = _depth_removed(frame, ~person.segment.mask)
-        return self._fit(tracker, frame, seen, person.joints, min(START_MIN_SCORE, tracker.config.min_score))
+        return self._fit(tracker, frame, ~person.segment.mask, person.joints,
+                         min(START_MIN_SCORE, tracker.config.min_score))
 
     @staticmethod
-    def _frame_for(frame: Frame, labels: np.ndarray | None, index: int, person: PersonDetection) -> Frame:
-        """``frame`` with the other people's depth removed (0) for person ``index`` (0-based)."""
+    def _others(labels: np.ndarray | None, index: int, person: PersonDetection) -> np.ndarray | None:
+        """(H, W) bool: the other people's pixels for person ``index`` (0-based), None when there are none."""
         if labels is None or person.segment is None:
-            return frame
+            return None
         others = (labels != 0) & (labels != index + 1)
-        if not others.any():
-            return frame
-        return _depth_removed(frame, others)
+        return others if others.any() else None
 
 
 def _depth_removed(frame: Frame, where: np.ndarray) -> Frame:

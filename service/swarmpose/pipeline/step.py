@@ -200,7 +200,7 @@ class FramePipeline:
             try:
                 reuse = self._floor.reusable(frame.intrinsics)
                 props = self._props.known(frame.depth, frame.intrinsics)
-                if props is not None:
+                if props is not None and log.isEnabledFor(logging.DEBUG):  # a full-frame count: only when shown
                     log.debug("frame %d: %d pixels of known props left out", frame.index, int(props.sum()))
                 segmentation = segment_people(frame.depth, frame.intrinsics, max_people=2 * self.max_people,
                                               floor=self._floor.plane if reuse else "auto", background=props)

@@ -232,8 +232,8 @@ def table_for(body: SkinnedBody, poses: np.ndarray, eye: np.ndarray, who: str = 
     """The table between the camera at ``eye`` (3,) world m and a person (poses (N, 36), world
     frame); see the module docstring. ConfigError when the person comes too near the camera to
     leave room for it."""
-    low = int(np.argmin(body.posed_points(poses, ["mid_hip"])[:, 0, 1]))
-    seat = body.posed_points(poses[low:low + 1], ["mid_hip"])[0, 0] * [1.0, 0.0, 1.0]
+    hips = body.posed_points(poses, ["mid_hip"])[:, 0]
+    seat = hips[int(np.argmin(hips[:, 1]))] * [1.0, 0.0, 1.0]
     ahead = (np.asarray(eye, float) - seat) * [1.0, 0.0, 1.0]
     span = float(np.linalg.norm(ahead))
     ahead /= span

@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarmpose.core.errors import ConfigError, check_shape
+from swarmpose.sim.evaluate import joint_errors
 
 LAG_WINDOW_S = 0.5
 """The span of motion (s, from its first moving frame) the lag is fitted over."""
@@ -104,7 +105,7 @@ def still_report(estimates: np.ndarray, truth: np.ndarray, moves_at: int, fps: f
     jitter = jitter_mm(still)
     names = joint_names or tuple(range(e.shape[1]))
     worst = int(np.nanargmax(jitter)) if np.isfinite(jitter).any() else None
-    error = 1000.0 * np.linalg.norm(e - g, axis=2)  # (F, J) mm
+    error = joint_errors(e, g)  # (F, J) mm
     onset_end = moves_at + int(round(ONSET_S * fps))
     lag = motion_lag_ms(e, g, moves_at, fps, settle)
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from swarmpose.core.camera import Intrinsics
 from swarmpose.core.errors import ConfigError
+from swarmpose.tracking.lift import sample_surface_depth
 
 HIDDEN_MARGIN_M = 0.15
 """A joint is hidden when the depth at its image point is this much or more in front of it: more than a
@@ -36,36 +37,28 @@ def hidden_joints(depth: np.ndarray, intrinsics: Intrinsics, joints: np.ndarray,
     if joints.ndim != 2 or joints.shape[1] != 3:
         raise ConfigError(f"joints must be (J, 3) metres, got {joints.shape}")
     hidden = np.ones(len(joints), dtype=bool)
-    finite = np.all(np.isfinite(joints), axis=1) & (joints[:, 2] > 0)
-    if not finite.any():
-        return hidden
-    uv = np.rint(intrinsics.project(joints[finite])).astype(np.int64)
-    h, w = depth.shape
-    for k, (u, v), z in zip(np.flatnonzero(finite), uv, joints[finite, 2]):
-        if not (0 <= u < w and 0 <= v < h):
-            continue
-        patch = depth[max(v - WINDOW_PX, 0):v + WINDOW_PX + 1, max(u - WINDOW_PX, 0):u + WINDOW_PX + 1]
-        seen = patch[np.isfinite(patch) & (patch > 0)]
-        if seen.size:
-            hidden[k] = float(np.median(seen)) < z - margin_m
+    for k in np.flatnonzero(np.all(np.isfinite(joints), axis=1) & (joints[:, 2] > 0)):
+        u, v = intrinsics.project(joints[k])
+        seen = sample_surface_depth(depth, u, v, 2 * WINDOW_PX + 1, cluster_m=np.inf)  # all measured pixels
+        if np.isfinite(seen):  # NaN: outside the image, or nothing measured there
+            hidden[k] = seen < joints[k, 2] - margin_m
     return hidden
 
 
-def split_errors_mm(estimates: np.ndarray, truth: np.ndarray, hidden: np.ndarray) -> dict[str, float | None]:
+def split_errors_mm(errors_mm: np.ndarray, hidden: np.ndarray) -> dict[str, float | None]:
     """Mean joint error (mm) over the visible and over the hidden true joints, and the hidden share.
 
-    estimates, truth: (F, J, 3) m (NaN rows: a lost frame, left out); hidden: (F, J) bool
-    (:func:`hidden_joints` per frame). Returns ``visible_mm`` and ``hidden_mm`` (None where no such
-    joint was estimated) and ``hidden_share`` (of the estimated joints, 0..1; None: none estimated)."""
-    estimates, truth, hidden = np.asarray(estimates, float), np.asarray(truth, float), np.asarray(hidden, bool)
-    if estimates.shape != truth.shape or hidden.shape != truth.shape[:2]:
-        raise ConfigError(f"estimates {estimates.shape}, truth {truth.shape} and hidden {hidden.shape} must be "
-                          "(F, J, 3), (F, J, 3) and (F, J)")
-    error = np.linalg.norm(estimates - truth, axis=-1)
+    errors_mm: (F, J) per-joint errors (:func:`swarmpose.sim.evaluate.joint_errors`; NaN: not
+    estimated, left out); hidden: (F, J) bool (:func:`hidden_joints` per frame). Returns
+    ``visible_mm`` and ``hidden_mm`` (None where no such joint was estimated) and ``hidden_share``
+    (of the estimated joints, 0..1; None: none estimated)."""
+    error, hidden = np.asarray(errors_mm, float), np.asarray(hidden, bool)
+    if hidden.shape != error.shape:
+        raise ConfigError(f"errors {error.shape} and hidden {hidden.shape} must both be (F, J)")
     known = np.isfinite(error)
 
     def mean(mask: np.ndarray) -> float | None:
-        return float(1000 * error[mask].mean()) if mask.any() else None
+        return float(error[mask].mean()) if mask.any() else None
 
     return {"visible_mm": mean(known & ~hidden), "hidden_mm": mean(known & hidden),
             "hidden_share": float(hidden[known].mean()) if known.any() else None}
