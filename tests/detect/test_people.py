@@ -392,12 +392,12 @@ def test_the_head_height_profile_is_scipys_binned_maximum_smoothed():
     from swarmpose.detect.people import height_profile
 
     rng = np.random.default_rng(3)
-    for n_bins in (1, 2, 7, 40):
+    for n_bins, dtype in ((1, np.float64), (2, np.float64), (7, np.float32), (40, np.float64), (40, np.float32)):
         bins = rng.integers(0, n_bins, 300)
         if n_bins > 2:
             bins[bins == 1] = 0  # an empty bin
         bins[-1] = n_bins - 1
-        heights = rng.uniform(0.2, 1.9, 300)
+        heights = rng.uniform(0.2, 1.9, 300).astype(dtype)  # the segmentation's are float32
         low = heights.min()
         expected = np.asarray(maximum(heights, bins, np.arange(n_bins)), dtype=np.float64)
         expected[np.bincount(bins, minlength=n_bins) == 0] = low

@@ -215,6 +215,7 @@ def height_profile(heights: np.ndarray, bins: np.ndarray) -> np.ndarray:
     """(n_bins + 2,) the highest of ``heights`` (N,) m in each of the bins ``bins`` (N,) (0 ..
     n_bins - 1; the lowest height where a bin is empty), as a 3-bin mean with the edges repeated,
     between two bins at the lowest height."""
+    heights = np.asarray(heights, dtype=np.float64)  # one dtype: ufunc.at on mixed ones is 30x slower
     low = float(heights.min())
     profile = np.full(bins.max() + 1, low, dtype=np.float64)
     np.maximum.at(profile, bins, heights)
