@@ -211,6 +211,48 @@ def test_rechecks_are_due_every_n_frames_and_on_a_young_tracks_first_frames():
     assert not any(recheck_due(k, k, 0) for k in range(1, 30))  # --recheck 0: none at all
 
 
+def miss_px(body, intrinsics: Intrinsics, targets, pose: np.ndarray) -> float:
+    """The median image distance (px) of ``pose``'s points to the detected joints of ``targets``."""
+    pixels = intrinsics.project(body.posed_points(pose[None], targets.names)[0])
+    return float(np.median(np.linalg.norm(pixels - targets.xy, axis=1)))
+
+
+def recording_searches(tracker: BodyTracker) -> list[bool]:
+    """Wraps ``tracker.pso_search``: the list it fills, per search, with whether its objective renders depth."""
+    kinds, real = [], tracker.pso_search
+
+    def search(objective, *args, **kwargs):
+        kinds.append(objective.weights.depth > 0)
+        return real(objective, *args, **kwargs)
+
+    tracker.pso_search = search
+    return kinds
+
+
+def test_a_live_recheck_fits_the_joints_alone_and_ranks_by_the_full_objective(body, sequence):
+    """A re-check's facings: offline a joint-term PSO then a full-objective PSO from each (8 searches
+    for 4 facings); live (a frame budget) the joint-term PSO alone (4). Either way the fits come back
+    ranked by the full objective, best first, and the best has come to the detected joints."""
+    from swarmpose.tracking.facings import fit_facings
+    from swarmpose.tracking.init_pose import FACINGS_DEG, torso_pose
+    from swarmpose.tracking.objective import JointTargets
+
+    (frame, det), = [pair for k, pair in enumerate(frames_of(sequence)) if k == 2]
+    depth = frame.depth.astype(np.float32)
+    targets = JointTargets.from_detection(det, depth, frame.intrinsics, body, 0.3)
+    centre = torso_pose(body, dict(zip(targets.names, targets.xyz)), body.rest_angles)
+    for budget_ms, searches in ((0.0, 2 * len(FACINGS_DEG)), (60.0, len(FACINGS_DEG))):
+        tracker = BodyTracker(body, frame.intrinsics, TrackerConfig(**SMALL, seed=1))
+        tracker.budget_ms = budget_ms
+        kinds = recording_searches(tracker)
+        fits = fit_facings(tracker, centre, targets, depth, np.random.default_rng(0), {}, generations=4)
+        assert len(kinds) == searches and kinds.count(False) == len(FACINGS_DEG)  # the joint stage: every facing
+        tracker.objective.set_frame(depth, tracker.search_box(centre, targets), targets, centre)
+        assert np.all(np.diff(tracker.objective(np.stack(fits))) >= 0)
+        start_px = miss_px(body, frame.intrinsics, targets, centre)
+        assert miss_px(body, frame.intrinsics, targets, fits[0]) < 0.7 * start_px  # 7-9 px against 14
+
+
 def test_a_different_turned_solution_becomes_the_challenger_and_reset_forgets_it():
     """Frame k's best is the mirror, frame k+1's best another turned pose (neither the track's
     facing nor the challenger's): it does not replace the track but becomes the challenger;

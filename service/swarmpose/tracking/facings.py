@@ -48,6 +48,9 @@ def fit_facings(tracker: BodyTracker, centre: np.ndarray, targets: JointTargets,
     objective, so depth and the face's keypoints decide between a facing and its mirror. (One
     PSO of the full objective from the rest angles leaves a side view's limbs unfitted: the depth
     term is nearly flat in them and dominates E.) ``generations``: a re-check's (None: a start).
+    A live re-check (the tracker has a frame budget) runs the joint stage alone: its fits are still
+    ranked by the full objective and join the frame's swarm, which scores them on the depth anyway,
+    and the full stage's rendering doubled the cost of a frame that re-checks (the latency's tail).
     """
     if targets.count == 0:
         return [centre]
@@ -67,6 +70,7 @@ def fit_facings(tracker: BodyTracker, centre: np.ndarray, targets: JointTargets,
     # a start runs once per track, so it gets at least config.start_budget (a smaller one left a side
     # view's start unconverged), live a share of it; a re-check the frame's generations, live the start's particles
     first = generations is None
+    full_stage = first or tracker.budget_ms <= 0  # live, a re-check fits the joints alone (see the doc)
     config = tracker.config
     particles, budget = start_budget(config.start_budget, tracker.budget_ms, config.particles, config.generations)
     if not first:
@@ -80,7 +84,7 @@ def fit_facings(tracker: BodyTracker, centre: np.ndarray, targets: JointTargets,
         start = search.spread(facing, pso.particles, rng, np.full(3, 0.08), 0.3, 1.0)
         start[0] = facing
         fit = tracker.pso_search(joint_objective or start_objective, start, rng, pso).best
-        if joint_objective is not None:
+        if joint_objective is not None and full_stage:
             start = search.spread(fit, pso.particles, rng, np.full(3, 0.04), 0.1, 0.3)
             start[0] = fit
             fit = tracker.pso_search(start_objective, start, rng, pso).best
@@ -94,7 +98,8 @@ def recheck_facings(tracker: BodyTracker, index: int, lifted: dict[str, np.ndarr
                     depth: np.ndarray, rng: np.random.Generator, timings: dict[str, float],
                     generations: int) -> list[np.ndarray]:
     """Every ``config.recheck`` frames and on a young track's :data:`YOUNG_RECHECKS` frames,
-    the start's facings refitted from the detection on a quarter of the frame's ``generations``:
+    the start's facings refitted from the detection on a quarter of the frame's ``generations``
+    (live: the joint stage alone, :func:`fit_facings`):
     they join the swarm as particles, so a track locked in a wrong facing or limb configuration is
     replaced as soon as they explain the frame better."""
     if not recheck_due(index, tracker.age + 1, tracker.config.recheck) or targets.count == 0:  # this frame's age
