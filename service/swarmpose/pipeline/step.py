@@ -15,7 +15,9 @@ With ``max_people`` > 1 the detection half first finds the people in the depth
 (:func:`swarmpose.detect.people.segment_people`) and runs the detector on each one's crop
 (:func:`swarmpose.detect.per_person.detect_each`); the tracking half gives them to a
 :class:`~swarmpose.people.people_tracker.PeopleTracker` (one track and id per person).
-Where the segmentation finds nobody, the frame is detected and tracked as with one person.
+Where the segmentation finds nobody, the frame is detected and tracked as with one person. Live,
+while it finds the one tracked person alone, only every :data:`SEGMENT_ALONE_EVERY`-th frame is
+segmented (the frames between are detected whole).
 
 With a :class:`~swarmpose.pipeline.world.WorldFrame` (``--floor``), the detection half fits the
 floor until it is known and the tracking half sets the world origin under the first tracked
@@ -55,6 +57,12 @@ FLOOR_REFIT_FRAMES = 15
 """The floor plane is fitted again every this many frames (8 ms a fit; a camera may move)."""
 NOBODY = "no person found (none in the depth whose detection shows a person)"
 EMPTY_DEPTH = "the depth image has no valid pixels (every one 0: no measurement)"
+SEGMENT_ALONE_EVERY = 4
+"""Live (a frame period set), while exactly one person is tracked and the last segmentation found them
+alone (nobody else, no prop beside them), only every this many-th frame is segmented; the frames
+between are detected whole, as with one person. The lone person's fit depth is the same either way
+(nothing is left out of it), and on 2 cores the segmentation's CPU (15-20 ms a frame) slowed the
+search in the other thread. Someone who comes into view is found at the next segmented frame."""
 
 
 @dataclass
@@ -73,6 +81,9 @@ class Detection:
     segmentation: Segmentation | None = None
     segment_ms: float = 0.0
     props: np.ndarray | None = None
+    unsegmented: bool = False
+    """Live, the frame was detected whole because the last segmentation found the one tracked person
+    alone (:data:`SEGMENT_ALONE_EVERY`)."""
 
     @property
     def timings_ms(self) -> dict[str, float]:
@@ -149,6 +160,7 @@ class FramePipeline:
         self.budget_ms = 0.0
         """The time a frame's tracking may take (ms), shared by its people (live; 0: the configured search)."""
         self._box_lock = threading.Lock()
+        self._alone = 0  # live: frames since a segmentation found the one tracked person alone (0: it did not)
         self._warned_empty = False  # a depth image without valid pixels is logged once
 
     @property
@@ -196,7 +208,8 @@ class FramePipeline:
         """:meth:`detect` without the floor of the world frame."""
         t0 = time.perf_counter()
         segmentation, segment_ms, props = None, 0.0, None
-        if self.max_people > 1:
+        unsegmented = self.max_people > 1 and self._unsegmented()
+        if self.max_people > 1 and not unsegmented:
             try:
                 reuse = self._floor.reusable(frame.intrinsics)
                 props = self._props.known(frame.depth, frame.intrinsics)
@@ -210,6 +223,8 @@ class FramePipeline:
             except Exception as exc:  # a segmentation that throws: the frame is detected as a whole
                 log.debug("frame %d: segmentation failed: %s", frame.index, exc_message(exc))
             segment_ms = 1000 * (time.perf_counter() - t0)
+            alone = segmentation is not None and len(segmentation.people) == 1 and segmentation.props is None
+            self._alone = 1 if alone and props is None and self.frame_period_s is not None else 0
         if segmentation is not None and segmentation.people:
             with self._box_lock:
                 hints = list(self._boxes)
@@ -236,7 +251,18 @@ class FramePipeline:
                 log.warning("frame %d: %s; check the depth stream (units, registration to colour); such frames "
                             "are tracked as having nobody in view", frame.index, EMPTY_DEPTH)
         people = (PersonDetection(None, joints, note),) if self.max_people > 1 else None
-        return Detection(joints, note, 1000 * (time.perf_counter() - t0), people, segmentation, segment_ms, props)
+        return Detection(joints, note, 1000 * (time.perf_counter() - t0), people, segmentation, segment_ms, props,
+                         unsegmented)
+
+    def _unsegmented(self) -> bool:
+        """Whether this frame is detected whole without a segmentation (:data:`SEGMENT_ALONE_EVERY`: live,
+        one person tracked, whom the last segmentation, fewer than that many frames ago, found alone)."""
+        if self.frame_period_s is None or not 0 < self._alone < SEGMENT_ALONE_EVERY:
+            return False
+        with self._box_lock:
+            one = len(self._boxes) == 1 and self._box is not None
+        self._alone = self._alone + 1 if one else 0
+        return one
 
     def track(self, frame: Frame, detection: Detection, received_ns: int = 0) -> FrameResult:
         """The bodies of ``frame`` given its detection; never raises for a frame it cannot track.
@@ -304,7 +330,7 @@ class FramePipeline:
                 timings[key] = timings.get(key, 0.0) + ms
         timings["track"] = 1000 * (time.perf_counter() - t0)
         timings["total"] = detection.ms + timings["track"]
-        found = sum(p.segment is not None for p in detection.people)
+        found = 1 if detection.unsegmented else sum(p.segment is not None for p in detection.people)
         people = {"tracked": sum(b.state != "lost" for b in bodies), "found": found, **self.people.counts.as_dict()}
         reason = detection.note if bodies else "; ".join(r for r in (detection.note, NOBODY) if r)
         return FrameResult(frame.index, frame.timestamp_ns, bodies, reason, timings, received_ns=received_ns,
@@ -340,7 +366,7 @@ class FramePipeline:
         if self.people is not None:
             self.people.reset()
         self.velocities.reset()
-        self._props = PropMemory()
+        self._props, self._alone = PropMemory(), 0
         with self._box_lock:
             self._box, self._boxes = None, []
             self._steady.reset()
