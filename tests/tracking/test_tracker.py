@@ -229,10 +229,10 @@ def recording_searches(tracker: BodyTracker) -> list[bool]:
     return kinds
 
 
-def test_a_live_recheck_fits_the_joints_alone_and_ranks_by_the_full_objective(body, sequence):
+def test_a_live_recheck_fits_the_joints_alone(body, sequence):
     """A re-check's facings: offline a joint-term PSO then a full-objective PSO from each (8 searches
-    for 4 facings); live (a frame budget) the joint-term PSO alone (4). Either way the fits come back
-    ranked by the full objective, best first, and the best has come to the detected joints."""
+    for 4 facings); live (a frame budget) the joint-term PSO alone (4). Either way the best fit has come
+    to the detected joints."""
     from swarmpose.tracking.facings import fit_facings
     from swarmpose.tracking.init_pose import FACINGS_DEG, torso_pose
     from swarmpose.tracking.objective import JointTargets
@@ -247,8 +247,6 @@ def test_a_live_recheck_fits_the_joints_alone_and_ranks_by_the_full_objective(bo
         kinds = recording_searches(tracker)
         fits = fit_facings(tracker, centre, targets, depth, np.random.default_rng(0), {}, generations=4)
         assert len(kinds) == searches and kinds.count(False) == len(FACINGS_DEG)  # the joint stage: every facing
-        tracker.objective.set_frame(depth, tracker.search_box(centre, targets), targets, centre)
-        assert np.all(np.diff(tracker.objective(np.stack(fits))) >= 0)
         start_px = miss_px(body, frame.intrinsics, targets, centre)
         assert miss_px(body, frame.intrinsics, targets, fits[0]) < 0.7 * start_px  # 7-9 px against 14
 

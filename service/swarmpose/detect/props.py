@@ -113,6 +113,11 @@ class PropMemory:
         self._sum: np.ndarray | None = None  # (H, W) float64: sum of the depths seen as a candidate, m
         self._count: np.ndarray | None = None  # (H, W) int32: frames running (a prop: CONFIRM_FRAMES or more)
 
+    @property
+    def empty(self) -> bool:
+        """Whether the memory holds nothing: no prop and no pixel on its way to being one."""
+        return self._count is None
+
     def _mean(self) -> np.ndarray:
         """(H, W) float32: the remembered depth (m), 0 where none."""
         out = np.zeros(self._count.shape, np.float32)

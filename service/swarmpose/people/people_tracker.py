@@ -278,8 +278,11 @@ class PeopleTracker:
         return joints.mean(axis=0) if len(joints) else otherwise
 
     def _observed_centre(self, centre: np.ndarray, body: BodyResult | None) -> np.ndarray:
-        """The segment's centre, or, without a segment (a whole-frame detection), the fit's."""
-        return centre if np.all(np.isfinite(centre)) else self._fit_centre(body, centre)
+        """The segment's centre, or, without a segment (a whole-frame detection), the fit's; none (NaN:
+        the track keeps its centre and velocity) from a fit judged lost."""
+        if np.all(np.isfinite(centre)) or (body is not None and body.state == "lost"):
+            return centre
+        return self._fit_centre(body, centre)
 
     def _associate(self, index: int, people: Sequence[PersonDetection], centres: list[np.ndarray],
                    looks: list[np.ndarray | None]) -> Assignment:

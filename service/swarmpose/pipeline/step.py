@@ -54,7 +54,7 @@ from swarmpose.tracking.result import FrameResult
 
 log = logging.getLogger(__name__)
 FLOOR_REFIT_FRAMES = 15
-"""The floor plane is fitted again every this many frames (8 ms a fit; a camera may move)."""
+"""The floor plane is fitted again every this many segmented frames (8 ms a fit; a camera may move)."""
 NOBODY = "no person found (none in the depth whose detection shows a person)"
 EMPTY_DEPTH = "the depth image has no valid pixels (every one 0: no measurement)"
 SEGMENT_ALONE_EVERY = 4
@@ -99,7 +99,7 @@ def describe_error(exc: BaseException) -> str:
 @dataclass
 class FloorCache:
     """The floor plane the segmentation reuses: fitted on a camera, used for
-    :data:`FLOOR_REFIT_FRAMES` frames of it, then fitted again (a camera may move)."""
+    :data:`FLOOR_REFIT_FRAMES` segmented frames of it, then fitted again (a camera may move)."""
 
     plane: FloorPlane | None = None
     intrinsics: Intrinsics | None = None
@@ -199,8 +199,9 @@ class FramePipeline:
         t0 = time.perf_counter()
         detection = self._detect(frame)
         if self.world is not None:  # the floor until known (the segmentation's own fit where it made one)
-            seg = detection.segmentation
-            self.world.observe_depth(frame, seg.floor if seg is not None else NOT_FITTED)
+            seg, cached = detection.segmentation, self._floor.plane
+            fitted = seg.floor if seg is not None else cached if detection.unsegmented and cached else NOT_FITTED
+            self.world.observe_depth(frame, fitted)
             detection.ms = 1000 * (time.perf_counter() - t0)
         return detection
 
@@ -223,8 +224,10 @@ class FramePipeline:
             except Exception as exc:  # a segmentation that throws: the frame is detected as a whole
                 log.debug("frame %d: segmentation failed: %s", frame.index, exc_message(exc))
             segment_ms = 1000 * (time.perf_counter() - t0)
-            alone = segmentation is not None and len(segmentation.people) == 1 and segmentation.props is None
-            self._alone = 1 if alone and props is None and self.frame_period_s is not None else 0
+            alone = (segmentation is not None and len(segmentation.people) == 1 and segmentation.props is None
+                     and self._props.empty and self.frame_period_s is not None)
+            with self._box_lock:  # reset() runs in the tracking thread
+                self._alone = 1 if alone else 0
         if segmentation is not None and segmentation.people:
             with self._box_lock:
                 hints = list(self._boxes)
@@ -257,11 +260,11 @@ class FramePipeline:
     def _unsegmented(self) -> bool:
         """Whether this frame is detected whole without a segmentation (:data:`SEGMENT_ALONE_EVERY`: live,
         one person tracked, whom the last segmentation, fewer than that many frames ago, found alone)."""
-        if self.frame_period_s is None or not 0 < self._alone < SEGMENT_ALONE_EVERY:
+        if self.frame_period_s is None:
             return False
         with self._box_lock:
-            one = len(self._boxes) == 1 and self._box is not None
-        self._alone = self._alone + 1 if one else 0
+            one = 0 < self._alone < SEGMENT_ALONE_EVERY and len(self._boxes) == 1 and self._box is not None
+            self._alone = self._alone + 1 if one else 0
         return one
 
     def track(self, frame: Frame, detection: Detection, received_ns: int = 0) -> FrameResult:
@@ -330,7 +333,8 @@ class FramePipeline:
                 timings[key] = timings.get(key, 0.0) + ms
         timings["track"] = 1000 * (time.perf_counter() - t0)
         timings["total"] = detection.ms + timings["track"]
-        found = 1 if detection.unsegmented else sum(p.segment is not None for p in detection.people)
+        found = (int(detection.joints is not None) if detection.unsegmented
+                 else sum(p.segment is not None for p in detection.people))
         people = {"tracked": sum(b.state != "lost" for b in bodies), "found": found, **self.people.counts.as_dict()}
         reason = detection.note if bodies else "; ".join(r for r in (detection.note, NOBODY) if r)
         return FrameResult(frame.index, frame.timestamp_ns, bodies, reason, timings, received_ns=received_ns,
@@ -366,9 +370,9 @@ class FramePipeline:
         if self.people is not None:
             self.people.reset()
         self.velocities.reset()
-        self._props, self._alone = PropMemory(), 0
+        self._props = PropMemory()
         with self._box_lock:
-            self._box, self._boxes = None, []
+            self._box, self._boxes, self._alone = None, [], 0
             self._steady.reset()
 
 
