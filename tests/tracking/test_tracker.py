@@ -251,6 +251,18 @@ def test_a_live_recheck_fits_the_joints_alone(body, sequence):
         assert miss_px(body, frame.intrinsics, targets, fits[0]) < 0.7 * start_px  # 7-9 px against 14
 
 
+def test_a_short_live_frame_seeds_the_limbs_at_their_lifts_and_an_offline_one_does_not(body, sequence):
+    """Live (a frame budget) with fewer than LEAN_BELOW generations a tracked frame adds the limb seeds
+    of :mod:`swarmpose.tracking.lifted_limbs`; offline the same search does not."""
+    intr = Intrinsics.load(sequence / "intrinsic.json")
+    for budget_ms, seeded in ((60.0, True), (0.0, False)):
+        tracker = BodyTracker(body, intr, TrackerConfig(particles=24, generations=8))
+        tracker.budget_ms, tracker.frame_period_s = budget_ms, 1 / 15
+        results = [tracker.step(frame, det) for frame, det in frames_of(sequence)]
+        assert all(r.state != "lost" for r in results)
+        assert [("lifted" in r.timings_ms) for r in results[1:]] == [seeded] * (FRAMES - 1)
+
+
 def test_a_different_turned_solution_becomes_the_challenger_and_reset_forgets_it():
     """Frame k's best is the mirror, frame k+1's best another turned pose (neither the track's
     facing nor the challenger's): it does not replace the track but becomes the challenger;

@@ -55,7 +55,7 @@ STAGES = {
     "segment": ("segment",),
     "search": ("pso",),
     "rechecks": ("recheck", "init"),
-    "flips and proposals": ("scene", "hidden", "arms", "flips", "hypotheses"),
+    "flips and proposals": ("scene", "hidden", "arms", "flips", "hypotheses", "lifted"),
     "polish": ("polish",),
     "verdict": ("verdict",),
     "smoothing": ("smoothing",),

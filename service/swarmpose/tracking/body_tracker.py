@@ -59,6 +59,7 @@ from swarmpose.tracking.history import TrackHistory
 from swarmpose.tracking.hypotheses import MERGE_SHARE, hypothesis_groups
 from swarmpose.tracking.init_pose import NO_TORSO, torso_pose
 from swarmpose.tracking.lift import lifted_body
+from swarmpose.tracking.lifted_limbs import lifted_limb_seeds
 from swarmpose.tracking.limb_flips import limb_flips
 from swarmpose.tracking.objective import JointTargets, Objective, search_split
 from swarmpose.tracking.one_euro import PoseFilter
@@ -306,9 +307,12 @@ class BodyTracker:
         radius = search.angle_radius(self.body, self.intrinsics, centre, targets)
         ahead = self.history.periods_since(frame.timestamp_ns, self.frame_period_s)  # > 1: frames dropped
         start = search.spread(centre, pso.particles, rng, 0.04 * np.sqrt(ahead) + offset, 0.15, radius)
-        seeds = ([centre] + self.history.predicted(frame.timestamp_ns, ahead)
-                 + ([self.challenger] if self.challenger is not None else [])
+        predicted = self.history.predicted(frame.timestamp_ns, ahead)
+        seeds = ([centre] + predicted + ([self.challenger] if self.challenger is not None else [])
                  + self.history.newest_first() + ([torso] if torso is not None else []) + recheck)
+        if lean and self.config.mode != "depth":  # live, a short search: the limbs sent to their lifts
+            with timed(timings, "lifted"):
+                seeds += lifted_limb_seeds(self.body, [centre if torso is None else torso] + predicted[:1], targets)
         box = self.search_box(centre, targets)
         room = pso.particles - len(seeds)
         if arms and room > 0:  # as many as the swarm has room for

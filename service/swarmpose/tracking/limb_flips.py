@@ -104,10 +104,10 @@ def flip_targets(pivot: np.ndarray, middle: np.ndarray, end: np.ndarray) -> list
 
 
 def solve_limbs(body: SkinnedBody, pose: np.ndarray, limbs: Sequence[tuple[str, str, str]],
-                targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                targets: np.ndarray, steps: int = STEPS) -> tuple[np.ndarray, np.ndarray]:
     """K copies of ``pose`` (36,), each with one limb's 4 angles (:func:`limb_columns`) moved so
-    that its middle and end points reach their targets; ``pose`` (K, 36): each candidate solved
-    from its own start.
+    that its middle and end points reach their targets by ``steps`` Gauss-Newton steps; ``pose``
+    (K, 36): each candidate solved from its own start.
 
     limbs: K (pivot, middle, end) point names out of :data:`FLIP_LIMBS`; targets: (K, 2, 3) m, the
     middle's and the end's. Returns the solved poses (K, 36) and each one's larger miss (K,) m."""
@@ -127,7 +127,7 @@ def solve_limbs(body: SkinnedBody, pose: np.ndarray, limbs: Sequence[tuple[str, 
         return pts[:, rows, where].reshape(len(pts), k, 6)
 
     goal = targets.reshape(k, 6)
-    for _ in range(STEPS):
+    for _ in range(steps):
         batch = np.repeat(x[None], 5, axis=0)
         for d in range(4):
             batch[d + 1, np.arange(k), cols[:, d]] += DELTA_RAD
