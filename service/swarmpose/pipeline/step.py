@@ -160,7 +160,7 @@ class FramePipeline:
         self.budget_ms = 0.0
         """The time a frame's tracking may take (ms), shared by its people (live; 0: the configured search)."""
         self._box_lock = threading.Lock()
-        self._alone = 0  # live: frames since a segmentation found the one tracked person alone (0: it did not)
+        self._alone = 0  # frames since a segmentation found one person alone (0: it did not; used live only)
         self._warned_empty = False  # a depth image without valid pixels is logged once
 
     @property
@@ -225,7 +225,7 @@ class FramePipeline:
                 log.debug("frame %d: segmentation failed: %s", frame.index, exc_message(exc))
             segment_ms = 1000 * (time.perf_counter() - t0)
             alone = (segmentation is not None and len(segmentation.people) == 1 and segmentation.props is None
-                     and self._props.empty and self.frame_period_s is not None)
+                     and self._props.empty)
             with self._box_lock:  # reset() runs in the tracking thread
                 self._alone = 1 if alone else 0
         if segmentation is not None and segmentation.people:

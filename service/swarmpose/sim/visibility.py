@@ -37,8 +37,8 @@ def hidden_joints(depth: np.ndarray, intrinsics: Intrinsics, joints: np.ndarray,
     if joints.ndim != 2 or joints.shape[1] != 3:
         raise ConfigError(f"joints must be (J, 3) metres, got {joints.shape}")
     hidden = np.ones(len(joints), dtype=bool)
-    for k in np.flatnonzero(np.all(np.isfinite(joints), axis=1) & (joints[:, 2] > 0)):
-        u, v = intrinsics.project(joints[k])
+    placed = np.flatnonzero(np.all(np.isfinite(joints), axis=1) & (joints[:, 2] > 0))
+    for k, (u, v) in zip(placed, intrinsics.project(joints[placed])):
         seen = sample_surface_depth(depth, u, v, 2 * WINDOW_PX + 1, cluster_m=np.inf)  # all measured pixels
         if np.isfinite(seen):  # NaN: outside the image, or nothing measured there
             hidden[k] = seen < joints[k, 2] - margin_m

@@ -49,14 +49,13 @@ def lifted_limb_seeds(body: SkinnedBody, bases: list[np.ndarray], targets: Joint
     if not limbs or not bases:
         return []
     names = tuple(n for limb in limbs for n in limb[1:])
+    now = body.posed_points(np.asarray(bases, dtype=np.float64), names).reshape(len(bases), -1, 2, 3)
+    far = np.linalg.norm(now - lifts, axis=3).max(axis=2) > FAR_M  # (bases, limbs)
     starts, chosen, goals = [], [], []
-    for b, base in enumerate(bases):
-        now = body.posed_points(np.asarray(base, dtype=np.float64)[None], names)[0].reshape(-1, 2, 3)
-        far = np.linalg.norm(now - lifts, axis=2).max(axis=1) > FAR_M
-        for k in np.flatnonzero(far):
-            starts.append(base)
-            chosen.append((b, limbs[k]))
-            goals.append(lifts[k])
+    for b, k in zip(*np.nonzero(far)):
+        starts.append(bases[b])
+        chosen.append((int(b), limbs[k]))
+        goals.append(lifts[k])
     if not chosen:
         return []
     solved, _ = solve_limbs(body, np.asarray(starts, dtype=np.float64), [limb for _, limb in chosen],
