@@ -1,4 +1,4 @@
-"""Just-in-time detection: how long detection waits, against the running means worked out by hand."""
+"""Just-in-time detection: how long detection waits, against the median and mean worked out by hand."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from swarmpose.pipeline.schedule import JustInTime
+from swarmpose.pipeline.schedule import RECENT_FRAMES, JustInTime
 from swarmpose.tracking.budget import SMOOTHING
 
 
@@ -50,3 +50,33 @@ def test_a_waiting_detection_wakes_when_the_tracker_finishes_early():
     started = time.monotonic()
     timing.wait()
     assert time.monotonic() - started < 2.0 and timing.wait_s() == 0.0
+
+
+def _track_frames(timing: JustInTime, now: list[float], seconds: list[float]) -> None:
+    for s in seconds:
+        timing.tracking()
+        now[0] += s
+        timing.tracked()
+
+
+def test_one_slow_frame_does_not_hold_back_the_next_detections(monkeypatch):
+    """A track's start takes 0.8 s among 0.1 s frames: the next frame's detection is still due
+    0.1 s less its own time after the tracker starts (a running mean would say 0.31 s)."""
+    now = [100.0]
+    monkeypatch.setattr(time, "monotonic", lambda: now[0])
+    timing = JustInTime()
+    timing.detected(0.02)
+    _track_frames(timing, now, [0.1] * 5 + [0.8])
+    assert timing.track_s == pytest.approx(0.1)
+    timing.tracking()
+    assert timing.wait_s() == pytest.approx(0.1 - 0.02)
+
+
+def test_the_due_time_follows_the_tracker_when_its_frames_get_slower(monkeypatch):
+    """The median of the last frames: half the recent frames slower moves the due time to them."""
+    now = [100.0]
+    monkeypatch.setattr(time, "monotonic", lambda: now[0])
+    timing = JustInTime()
+    timing.detected(0.01)
+    _track_frames(timing, now, [0.1] * RECENT_FRAMES + [0.3] * (RECENT_FRAMES // 2 + 1))
+    assert timing.track_s == pytest.approx(0.3)

@@ -3,24 +3,38 @@
 Live, the tracker takes the newest detected frame when it is done with the last one. A frame
 detected as soon as the tracker started waits in between for most of a tracking period, and its
 pose comes that much later. So detection waits until the tracker is due to finish less the time a
-detection takes (running means of both), then takes the newest frame: the frame is as fresh as it
-can be when the tracker takes it, and detection still runs beside the end of the search.
+detection takes, then takes the newest frame: the frame is as fresh as it can be when the tracker
+takes it, and detection still runs beside the end of the search. Once that moment has passed and
+the tracker is still busy, detection takes every new frame, so the one waiting stays fresh.
+
+The tracker is due after the median of its last :data:`RECENT_FRAMES` frames. A track's start or a
+re-check takes several times a usual frame; a running mean would carry such a frame into the next
+few frames' waits, and the frame detected at the start of each would wait there for a whole slow
+frame's time. The median ignores the odd slow frame. Detection's own time is a running mean.
 """
 
 from __future__ import annotations
 
+import collections
+import statistics
 import threading
 import time
 
 from swarmpose.tracking.budget import running_mean
 
+RECENT_FRAMES = 9
+"""How many of the tracker's last frames the median tracking time is taken over."""
+
 
 class JustInTime:
-    """Running means of the tracking and detection times, and how long detection should wait."""
+    """The median tracking time of the last frames, the running mean of the detection times, and how
+    long detection should wait."""
 
     def __init__(self):
         self._lock = threading.Lock()
+        self._recent: collections.deque[float] = collections.deque(maxlen=RECENT_FRAMES)
         self.track_s: float | None = None
+        """The median of the last :data:`RECENT_FRAMES` tracking times (s); None before the first."""
         self.detect_s: float | None = None
         self._tracking_since: float | None = None
         self.idle = threading.Event()
@@ -37,7 +51,8 @@ class JustInTime:
         """The tracker finished its frame."""
         with self._lock:
             if self._tracking_since is not None:
-                self.track_s = running_mean(self.track_s, time.monotonic() - self._tracking_since)
+                self._recent.append(time.monotonic() - self._tracking_since)
+                self.track_s = statistics.median(self._recent)
             self._tracking_since = None
             self.idle.set()
 
