@@ -263,6 +263,46 @@ def test_a_short_live_frame_seeds_the_limbs_at_their_lifts_and_an_offline_one_do
         assert [("lifted" in r.timings_ms) for r in results[1:]] == [seeded] * (FRAMES - 1)
 
 
+def started_with_sizes(body, intr, frame, det, budget_ms: float, monkeypatch):
+    """A track started on ``frame`` (40 generations, 20 polish rounds configured) with a frame budget of
+    ``budget_ms``: (its result, the generations of its last search, the polish rounds it ran)."""
+    import swarmpose.tracking.body_tracker as body_tracker
+
+    tracker = BodyTracker(body, intr, TrackerConfig(particles=24, generations=40, polish=20, start_budget=24))
+    tracker.budget_ms = budget_ms
+    searches, polished = [], []
+    real_search, real_polish = tracker.pso_search, body_tracker.polish_solution
+
+    def search(objective, start, rng, pso, *args, **kwargs):
+        searches.append(pso.generations)
+        return real_search(objective, start, rng, pso, *args, **kwargs)
+
+    def polish(objective, result, previous, rounds, *args):
+        polished.append(rounds)
+        return real_polish(objective, result, previous, rounds, *args)
+
+    tracker.pso_search = search
+    monkeypatch.setattr(body_tracker, "polish_solution", polish)
+    return tracker.step(frame, det), searches[-1], polished
+
+
+def test_a_live_start_runs_a_short_search_after_the_facings_and_an_offline_one_the_configured(
+        body, sequence, monkeypatch):
+    """A track's start with 40 generations and 20 polish rounds configured: offline its swarm after the
+    facings' fits runs 40 generations and the polish 20 rounds; live (a frame budget) 16 and 8. Either way
+    the start finds the walker (mean joint error under 80 mm)."""
+    from swarmpose.tracking.budget import LIVE_START_GENERATIONS, LIVE_START_POLISH
+
+    intr = Intrinsics.load(sequence / "intrinsic.json")
+    (frame, det), = [pair for k, pair in enumerate(frames_of(sequence)) if k == 0]
+    truth = load_ground_truth(sequence).joints3d[0]
+    for budget_ms, generations, rounds in ((0.0, 40, 20), (60.0, LIVE_START_GENERATIONS, LIVE_START_POLISH)):
+        result, searched, polished = started_with_sizes(body, intr, frame, det, budget_ms, monkeypatch)
+        assert result.state == "init"
+        assert (searched, polished) == (generations, [rounds])
+        assert 1000 * np.mean(np.linalg.norm(result.joints3d - truth, axis=1)) < 80
+
+
 def test_a_different_turned_solution_becomes_the_challenger_and_reset_forgets_it():
     """Frame k's best is the mirror, frame k+1's best another turned pose (neither the track's
     facing nor the challenger's): it does not replace the track but becomes the challenger;

@@ -7,7 +7,8 @@ frame's swarm runs as many generations, and the polish as many rounds, as the ti
 the frame leaves allows, up to the configured ones: 3/4 of it to the swarm and 1/4 to the polish
 (the configured budgets' share). The cost of a scored pose and the time outside the search are
 running means over the frames tracked so far (:class:`FrameBudget`). A starved search skips the
-proposals (:func:`lean_frame`), and a track's start is smaller (:func:`start_budget`).
+proposals (:func:`lean_frame`), and a track's start is smaller (:func:`start_budget`,
+:func:`live_start_search`).
 """
 
 from __future__ import annotations
@@ -28,6 +29,10 @@ LEAN_BELOW = 16
 """With a budget, a frame whose swarm gets fewer generations than this skips the limb flips and arm
 proposals (and their sub-swarms): their host work (about 60 ms a frame on 2 cores) then costs the
 search more than they give, and a sub-swarm needs generations to refine its hypothesis."""
+LIVE_START_GENERATIONS = 16
+"""With a budget, a track's start runs its swarm for at most this many generations after the facings' fits."""
+LIVE_START_POLISH = 8
+"""With a budget, a track's start polishes for at most this many rounds."""
 START_SHARE = 0.5
 """With a budget, a track's start runs this share of ``start_budget`` particles and generations each
 (a quarter of the scored poses): a lost track's restart holds up every frame behind it."""
@@ -83,3 +88,10 @@ def start_budget(configured: int, budget_ms: float, particles: int, generations:
         least = max(int(configured * START_SHARE), 1)
         return least, least
     return max(particles, configured), max(generations, configured)
+
+
+def live_start_search(pso: PsoConfig, polish: int) -> tuple[PsoConfig, int]:
+    """``pso`` and ``polish`` rounds of a live track's start: at most :data:`LIVE_START_GENERATIONS` and
+    :data:`LIVE_START_POLISH`. The facings' fits (:func:`start_budget` each) have found the person by then;
+    the configured search after them took about 0.3 s, which every frame behind the start waited for."""
+    return replace(pso, generations=min(pso.generations, LIVE_START_GENERATIONS)), min(polish, LIVE_START_POLISH)
