@@ -92,6 +92,6 @@ def start_budget(configured: int, budget_ms: float, particles: int, generations:
 
 def live_start_search(pso: PsoConfig, polish: int) -> tuple[PsoConfig, int]:
     """``pso`` and ``polish`` rounds of a live track's start: at most :data:`LIVE_START_GENERATIONS` and
-    :data:`LIVE_START_POLISH`. The facings' fits (:func:`start_budget` each) have found the person by then;
-    the configured search after them took about 0.3 s, which every frame behind the start waited for."""
+    :data:`LIVE_START_POLISH`. The facings' fits (:func:`start_budget` each) have found the person by then,
+    and every frame behind the start waits for the search after them."""
     return replace(pso, generations=min(pso.generations, LIVE_START_GENERATIONS)), min(polish, LIVE_START_POLISH)
