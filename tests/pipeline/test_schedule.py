@@ -34,7 +34,7 @@ def test_detection_waits_for_the_tracker_less_its_own_time(monkeypatch):
     now[0] += 0.09
     timing.tracked()  # a 100 ms frame again
     timing.detected(0.05)
-    assert timing.detect_s == pytest.approx(0.03 + SMOOTHING * (0.05 - 0.03))
+    assert timing.detect_s[False] == pytest.approx(0.03 + SMOOTHING * (0.05 - 0.03))
     timing.tracking()
     now[0] += 0.5
     assert timing.wait_s() == 0.0  # overdue: never negative
@@ -44,7 +44,7 @@ def test_a_waiting_detection_wakes_when_the_tracker_finishes_early():
     import threading
 
     timing = JustInTime()
-    timing.track_s, timing.detect_s = 5.0, 0.01  # a slow frame's mean: detection would wait about 5 s
+    timing.track_s, timing.detect_s = 5.0, {False: 0.01}  # a slow frame's mean: detection would wait about 5 s
     timing.tracking()
     threading.Timer(0.05, timing.tracked).start()
     started = time.monotonic()
@@ -80,3 +80,19 @@ def test_the_due_time_follows_the_tracker_when_its_frames_get_slower(monkeypatch
     timing.detected(0.01)
     _track_frames(timing, now, [0.1] * RECENT_FRAMES + [0.3] * (RECENT_FRAMES // 2 + 1))
     assert timing.track_s == pytest.approx(0.3)
+
+
+def test_a_segmenting_detection_starts_by_its_own_time(monkeypatch):
+    """Segmented detections take 0.08 s, whole-frame ones 0.02 s: with the tracker due after 0.1 s, a
+    detection that will segment starts 0.02 s after the tracker does, one that will not 0.08 s after;
+    before a kind is measured, the other kind's time stands in."""
+    now = [100.0]
+    monkeypatch.setattr(time, "monotonic", lambda: now[0])
+    timing = JustInTime()
+    timing.detected(0.02, segmented=False)
+    _track_frames(timing, now, [0.1])
+    timing.tracking()
+    assert timing.wait_s(segmenting=True) == pytest.approx(0.1 - 0.02)  # no segmented one measured yet
+    timing.detected(0.08, segmented=True)
+    assert timing.wait_s(segmenting=True) == pytest.approx(0.1 - 0.08)
+    assert timing.wait_s(segmenting=False) == pytest.approx(0.1 - 0.02)

@@ -25,8 +25,9 @@ def segmented_frames(results) -> list[int]:
 
 def tracked(folder, live: bool, monkeypatch, reset_at: int | None = None):
     """The results of every frame of ``folder`` through the per-frame step (``live``: a frame period
-    set, as ``serve`` does), and per tracker call whether the depth it got was the frame's own."""
-    own_depth, depths = [], {}
+    set, as ``serve`` does), per tracker call whether the depth it got was the frame's own, and the
+    frames the pipeline said beforehand it would segment (:meth:`FramePipeline.segments_next`)."""
+    own_depth, depths, predicted = [], {}, []
     real = BodyTracker.step
 
     def step(tracker, frame, *args, **kwargs):
@@ -42,8 +43,10 @@ def tracked(folder, live: bool, monkeypatch, reset_at: int | None = None):
             if frame.index == reset_at:
                 tracker.pipeline.reset()
             depths[frame.index] = frame.depth.copy()
+            if tracker.pipeline.segments_next():
+                predicted.append(frame.index)
             results.append(tracker.track_frame(frame))
-    return results, own_depth
+    return results, own_depth, predicted
 
 
 @pytest.fixture(scope="module")
@@ -66,9 +69,9 @@ def two(tmp_path_factory):
 
 
 def test_live_a_lone_person_is_segmented_every_few_frames_and_fitted_on_the_same_depth(walk, monkeypatch):
-    results, own_depth = tracked(walk, True, monkeypatch)
+    results, own_depth, predicted = tracked(walk, True, monkeypatch)
     assert SEGMENT_ALONE_EVERY == 4
-    assert segmented_frames(results) == [0, 4, 8]
+    assert segmented_frames(results) == predicted == [0, 4, 8]
     assert all(len([b for b in r.bodies if b.state != "lost"]) == 1 for r in results)
     assert [r.people["found"] for r in results] == [1] * FRAMES  # an unsegmented frame: the one found alone
     assert [b.id for r in results for b in r.bodies] == [0] * FRAMES
@@ -76,18 +79,18 @@ def test_live_a_lone_person_is_segmented_every_few_frames_and_fitted_on_the_same
 
 
 def test_offline_every_frame_is_segmented(walk, monkeypatch):
-    results, _ = tracked(walk, False, monkeypatch)
-    assert segmented_frames(results) == list(range(FRAMES))
+    results, _, predicted = tracked(walk, False, monkeypatch)
+    assert segmented_frames(results) == predicted == list(range(FRAMES))
 
 
 def test_a_reset_segments_the_next_frame(walk, monkeypatch):
-    results, _ = tracked(walk, True, monkeypatch, reset_at=2)
-    assert segmented_frames(results) == [0, 2, 6]
+    results, _, predicted = tracked(walk, True, monkeypatch, reset_at=2)
+    assert segmented_frames(results) == predicted == [0, 2, 6]
 
 
 def test_live_two_people_are_segmented_every_frame(two, monkeypatch):
-    results, own_depth = tracked(two, True, monkeypatch)
-    assert segmented_frames(results) == list(range(5))
+    results, own_depth, predicted = tracked(two, True, monkeypatch)
+    assert segmented_frames(results) == predicted == list(range(5))
     assert max(len(r.bodies) for r in results) == 2
     assert not all(own_depth)  # each person's depth leaves the other out
 
@@ -98,8 +101,8 @@ def test_live_a_person_beside_a_prop_is_segmented_every_frame(beside_a_box, monk
     of the fit's depth)."""
     first = next(iter(FolderSource(beside_a_box)))
     assert segment_people(first.depth, first.intrinsics).props is not None  # the box is beside the person
-    results, own_depth = tracked(beside_a_box, True, monkeypatch)
-    assert segmented_frames(results) == list(range(6))
+    results, own_depth, predicted = tracked(beside_a_box, True, monkeypatch)
+    assert segmented_frames(results) == predicted == list(range(6))
     assert not all(own_depth)  # the confirmed prop left out of the depth
 
 

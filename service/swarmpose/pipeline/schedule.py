@@ -10,7 +10,9 @@ the tracker is still busy, detection takes every new frame, so the one waiting s
 The tracker is due after the median of its last :data:`RECENT_FRAMES` frames. A track's start or a
 re-check takes several times a usual frame; a running mean would carry such a frame into the next
 few frames' waits, and the frame detected at the start of each would wait there for a whole slow
-frame's time. The median ignores the odd slow frame. Detection's own time is a running mean.
+frame's time. The median ignores the odd slow frame. Detection's own time is a running mean, one for
+the frames it segments and one for those it detects whole (a person tracked alone is segmented every
+few frames only, and a segmented frame's detection takes several times as long).
 """
 
 from __future__ import annotations
@@ -27,15 +29,16 @@ RECENT_FRAMES = 9
 
 
 class JustInTime:
-    """The median tracking time of the last frames, the running mean of the detection times, and how
-    long detection should wait."""
+    """The median tracking time of the last frames, the running means of the detection times (of
+    segmented frames and of frames detected whole), and how long detection should wait."""
 
     def __init__(self):
         self._lock = threading.Lock()
         self._recent: collections.deque[float] = collections.deque(maxlen=RECENT_FRAMES)
         self.track_s: float | None = None
         """The median of the last :data:`RECENT_FRAMES` tracking times (s); None before the first."""
-        self.detect_s: float | None = None
+        self.detect_s: dict[bool, float] = {}
+        """The running mean detection time (s) of segmented (True) and whole-frame (False) detections."""
         self._tracking_since: float | None = None
         self.idle = threading.Event()
         """Set while the tracker is between frames (a waiting detection wakes when it finishes early)."""
@@ -56,22 +59,24 @@ class JustInTime:
             self._tracking_since = None
             self.idle.set()
 
-    def detected(self, seconds: float) -> None:
-        """A detection took ``seconds``."""
+    def detected(self, seconds: float, segmented: bool = False) -> None:
+        """A detection took ``seconds``; ``segmented``: it segmented its frame."""
         with self._lock:
-            self.detect_s = running_mean(self.detect_s, seconds)
+            self.detect_s[segmented] = running_mean(self.detect_s.get(segmented), seconds)
 
-    def wait(self) -> None:
+    def wait(self, segmenting: bool = False) -> None:
         """Wait until detection should take the next frame: :meth:`wait_s`, or less when the tracker
         finishes its frame first."""
-        seconds = self.wait_s()
+        seconds = self.wait_s(segmenting)
         if seconds > 0:
             self.idle.wait(seconds)
 
-    def wait_s(self) -> float:
-        """How long detection should wait before it takes the next frame (0: take it now)."""
+    def wait_s(self, segmenting: bool = False) -> float:
+        """How long detection should wait before it takes the next frame (0: take it now); ``segmenting``:
+        the next detection segments its frame (the other kind's time until this kind's is known)."""
         with self._lock:
-            if self._tracking_since is None or self.track_s is None or self.detect_s is None:
+            detect_s = self.detect_s.get(segmenting, self.detect_s.get(not segmenting))
+            if self._tracking_since is None or self.track_s is None or detect_s is None:
                 return 0.0
-            due = self._tracking_since + self.track_s - self.detect_s
+            due = self._tracking_since + self.track_s - detect_s
         return max(due - time.monotonic(), 0.0)

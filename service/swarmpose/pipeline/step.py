@@ -257,13 +257,21 @@ class FramePipeline:
         return Detection(joints, note, 1000 * (time.perf_counter() - t0), people, segmentation, segment_ms, props,
                          unsegmented)
 
-    def _unsegmented(self) -> bool:
-        """Whether this frame is detected whole without a segmentation (:data:`SEGMENT_ALONE_EVERY`: live,
-        one person tracked, whom the last segmentation, fewer than that many frames ago, found alone)."""
-        if self.frame_period_s is None:
-            return False
+    def segments_next(self) -> bool:
+        """Whether the next detection segments its frame (it is counted by the detection, not here)."""
         with self._box_lock:
-            one = 0 < self._alone < SEGMENT_ALONE_EVERY and len(self._boxes) == 1 and self._box is not None
+            return self.max_people > 1 and not self._alone_skips()
+
+    def _alone_skips(self) -> bool:
+        """(``_box_lock`` held) whether a frame now is detected whole: live, one person tracked, whom the
+        last segmentation, fewer than :data:`SEGMENT_ALONE_EVERY` frames ago, found alone."""
+        return (self.frame_period_s is not None and 0 < self._alone < SEGMENT_ALONE_EVERY and len(self._boxes) == 1
+                and self._box is not None)
+
+    def _unsegmented(self) -> bool:
+        """Whether this frame is detected whole without a segmentation (:meth:`_alone_skips`), counted."""
+        with self._box_lock:
+            one = self._alone_skips()
             self._alone = self._alone + 1 if one else 0
         return one
 

@@ -263,7 +263,7 @@ class Worker:
         try:
             while True:
                 if self.drop_stale:  # live: just in time for the tracker
-                    self._timing.wait()
+                    self._timing.wait(self.pipeline.segments_next())
                     if self._stop.is_set():
                         return
                 got = self._acquired.get()
@@ -279,7 +279,7 @@ class Worker:
                         warn_skipped(self.source_uri, got.item, self._deferred_skips)
                 if isinstance(got.item, Frame):
                     got.detection = self.pipeline.detect(got.item)
-                    self._timing.detected(time.monotonic() - started)
+                    self._timing.detected(time.monotonic() - started, got.detection.segment_ms > 0)
                     if got.detection.note:
                         self.stats.update(detector_errors=1, detector_error=got.detection.note)
                         self.report(got.detection.note)
