@@ -50,7 +50,7 @@ from swarmpose.sources.base import Frame
 from swarmpose.tracking import search, verdict
 from swarmpose.tracking.arm_proposals import arm_proposals
 from swarmpose.tracking.body_scene import body_scene
-from swarmpose.tracking.budget import POLISH_CANDIDATES, FrameBudget, lean_frame, live_start_search
+from swarmpose.tracking.budget import POLISH_CANDIDATES, FrameBudget, lean_frame
 from swarmpose.tracking.config import TrackerConfig
 from swarmpose.tracking.facings import YOUNG_RECHECKS, fit_facings, recheck_facings
 from swarmpose.tracking.fitting import BodyFitting
@@ -220,11 +220,8 @@ class BodyTracker:
             return self._lost("no joints detected and no valid depth", t0, joints)
 
         rng = np.random.default_rng([self.config.seed, frame.index])
-        pso = self.config.pso_config
-        budget = self.budget_ms if state == "tracking" else 0.0  # live: the swarm and polish sized to the frame
-        pso, rounds = self.costs.sized(budget, pso, self.config.polish)
-        if state == "init" and self.budget_ms > 0:  # live: a start holds up every frame behind it
-            pso, rounds = live_start_search(pso, rounds)
+        pso, rounds = self.costs.sized(self.budget_ms, self.config.pso_config, self.config.polish,  # live: sized
+                                       start=state == "init")
         timings: dict[str, float] = {}
         proposals: list[np.ndarray] = []  # limb flips and arm proposals (tracking only)
         if state == "init":

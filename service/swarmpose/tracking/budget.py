@@ -8,7 +8,7 @@ the frame leaves allows, up to the configured ones: 3/4 of it to the swarm and 1
 (the configured budgets' share). The cost of a scored pose and the time outside the search are
 running means over the frames tracked so far (:class:`FrameBudget`). A starved search skips the
 proposals (:func:`lean_frame`), and a track's start is smaller (:func:`start_budget`,
-:func:`live_start_search`).
+:meth:`FrameBudget.sized`).
 """
 
 from __future__ import annotations
@@ -57,9 +57,17 @@ class FrameBudget:
         fitted_p = int((left - search) / (POLISH_CANDIDATES * self.ms_per_pose))
         return min(max(fitted_g, MIN_GENERATIONS), generations), max(min(fitted_p, polish), 0)
 
-    def sized(self, budget_ms: float, pso: PsoConfig, polish: int) -> tuple[PsoConfig, int]:
-        """``pso`` with the generations and the polish rounds of :meth:`plan`."""
-        generations, rounds = self.plan(budget_ms, pso.particles, pso.generations, polish)
+    def sized(self, budget_ms: float, pso: PsoConfig, polish: int, start: bool = False) -> tuple[PsoConfig, int]:
+        """``pso`` with the generations and the polish rounds of a frame: those of :meth:`plan`; at a
+        track's ``start`` (after its facings' fits, :func:`start_budget` each) the configured ones, with a
+        budget at most :data:`LIVE_START_GENERATIONS` and :data:`LIVE_START_POLISH`, since every frame
+        behind a live start waits for it."""
+        if start:
+            if budget_ms <= 0:
+                return pso, polish
+            generations, rounds = min(pso.generations, LIVE_START_GENERATIONS), min(polish, LIVE_START_POLISH)
+        else:
+            generations, rounds = self.plan(budget_ms, pso.particles, pso.generations, polish)
         return replace(pso, generations=generations), rounds
 
     def record(self, search_ms: float, poses: int, total_ms: float) -> None:
@@ -89,9 +97,3 @@ def start_budget(configured: int, budget_ms: float, particles: int, generations:
         return least, least
     return max(particles, configured), max(generations, configured)
 
-
-def live_start_search(pso: PsoConfig, polish: int) -> tuple[PsoConfig, int]:
-    """``pso`` and ``polish`` rounds of a live track's start: at most :data:`LIVE_START_GENERATIONS` and
-    :data:`LIVE_START_POLISH`. The facings' fits (:func:`start_budget` each) have found the person by then,
-    and every frame behind the start waits for the search after them."""
-    return replace(pso, generations=min(pso.generations, LIVE_START_GENERATIONS)), min(polish, LIVE_START_POLISH)
