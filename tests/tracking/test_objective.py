@@ -393,3 +393,32 @@ def test_a_fit_hidden_by_others_is_not_lost_on_its_2d_joints_while_its_depth_agr
     mostly_hidden["rendered"][0] = int(counts["both"][0] / (0.9 * HIDDEN_TRUST_SEEN))  # under half of it seen
     state, reason = judge(objective, mostly_hidden, targets, off, "tracking", 0.12, 0.4, observed_only=True)
     assert state == "lost" and reason.startswith("2D joints off")
+
+
+def test_the_surface_depth_is_the_median_of_the_nearest_cluster_numpys_way():
+    """The sorted-window reading against numpy's own percentile and median, on windows with holes,
+    NaN, two surfaces and edges of the image."""
+    from swarmpose.tracking.lift import sample_surface_depth
+
+    def oracle(depth, u, v, window_px, cluster_m=0.10):
+        half = max(1, window_px // 2)
+        iu, iv = int(round(u)), int(round(v))
+        if not (0 <= iu < depth.shape[1] and 0 <= iv < depth.shape[0]):
+            return float("nan")
+        patch = depth[max(0, iv - half):iv + half + 1, max(0, iu - half):iu + half + 1]
+        vals = patch[np.isfinite(patch) & (patch > 0)]
+        if vals.size == 0:
+            return float("nan")
+        return float(np.median(vals[vals <= np.percentile(vals, 20) + cluster_m]))
+
+    rng = np.random.default_rng(7)
+    for case in range(3000):
+        depth = rng.uniform(0.5, 4.0, (24, 24)).astype(np.float32)
+        depth[rng.random((24, 24)) < rng.random()] = 0.0
+        if case % 3 == 0:  # a person in front of a wall
+            depth[:, :12] = rng.choice([1.5, 1.55, 3.0], (24, 12)).astype(np.float32)
+        if case % 5 == 0:
+            depth[rng.random((24, 24)) < 0.1] = np.nan
+        u, v, window = rng.uniform(-2, 26), rng.uniform(-2, 26), int(rng.integers(3, 13))
+        want, got = oracle(depth, u, v, window), sample_surface_depth(depth, u, v, window)
+        assert got == want or (np.isnan(got) and np.isnan(want)), (case, got, want)

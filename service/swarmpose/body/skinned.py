@@ -32,6 +32,9 @@ from swarmpose.core.open3d_import import open3d
 MAX_INFLUENCES = 4
 MIN_LOD_TRIANGLES = 100
 SKINNING_METHODS = ("lbs", "dqs")
+POSE_MEMO = 16
+"""Single poses whose bone transforms a body remembers (:meth:`SkinnedBody.transforms`): one tracked
+frame poses its track's last pose, its prediction and its best fit several times over."""
 
 
 def sparse_skin(dense_or_pairs, n_vertices: int, k: int = MAX_INFLUENCES) -> tuple[np.ndarray, np.ndarray]:
@@ -88,6 +91,7 @@ class SkinnedBody:
     point_bones: np.ndarray
     point_rest: np.ndarray
     metadata: dict = field(default_factory=dict)
+    _memo: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         v, b, n = len(self.vertices), len(self.bone_names), len(self.point_names)
@@ -168,8 +172,24 @@ class SkinnedBody:
 
     # ------------------------------------------------------------------ posing
     def transforms(self, h: np.ndarray) -> np.ndarray:
-        """Bone transforms (P, B, 3, 4) for poses ``h`` (P, 36)."""
-        return skinning_transforms(self.rig, np.atleast_2d(h))
+        """Bone transforms (P, B, 3, 4) for poses ``h`` (P, 36), read-only.
+
+        A single pose's are remembered (the last :data:`POSE_MEMO` ones; the body is immutable, so
+        they stay right): a frame's steps pose the same few poses again and again."""
+        h = np.atleast_2d(np.asarray(h, dtype=np.float64))
+        if h.shape[0] != 1:
+            out = skinning_transforms(self.rig, h)
+            out.setflags(write=False)
+            return out
+        key = h.tobytes() + bytes(str(h.shape), "ascii")
+        out = self._memo.get(key)
+        if out is None:
+            out = skinning_transforms(self.rig, h)
+            out.setflags(write=False)
+            if len(self._memo) >= POSE_MEMO:
+                self._memo.clear()  # atomic, whichever thread poses this body
+            self._memo[key] = out
+        return out
 
     def pose(self, h: np.ndarray, skinning: str = "lbs") -> np.ndarray:
         """Posed vertices (P, V, 3) in the camera frame for poses (P, 36); ``skinning`` lbs|dqs."""

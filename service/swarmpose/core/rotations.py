@@ -16,39 +16,37 @@ def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
     q = np.asarray(q, dtype=np.float64)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
+    xx, yy, zz, xy, xz, yz, wx, wy, wz = x * x, y * y, z * z, x * y, x * z, y * z, w * x, w * y, w * z
+    m = np.empty(q.shape[:-1] + (3, 3))
+    m[..., 0, 0], m[..., 0, 1], m[..., 0, 2] = 1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy)
+    m[..., 1, 0], m[..., 1, 1], m[..., 1, 2] = 2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx)
+    m[..., 2, 0], m[..., 2, 1], m[..., 2, 2] = 2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)
+    return m
+
+
+_BRANCH_TERMS = np.array([[0, 1, 2, 3], [1, 0, 4, 5], [2, 4, 0, 6], [3, 5, 6, 0]])
+"""For each of :func:`matrix_to_quaternion`'s four formulas, which of its seven terms make w, x, y, z."""
+_DIAGONAL = np.array([0, 4, 8])
+_TERM_FIRST, _TERM_SECOND = np.array([7, 2, 3, 1, 2, 5]), np.array([5, 6, 1, 3, 6, 7])
+"""The flat (row-major) entries of the six other terms: m21 - m12, m02 - m20, m10 - m01, m01 + m10, m02 + m20,
+m12 + m21, each ``first - second`` (the three differences) or ``first + second`` (the three sums)."""
 
 
 def matrix_to_quaternion(m: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) -> unit quaternions (..., 4) wxyz with w >= 0."""
+    """Rotation matrices (..., 3, 3) -> unit quaternions (..., 4) wxyz with w >= 0.
+
+    Of the four textbook formulas, each matrix takes the one with the largest denominator
+    (the numerically stable one); all are computed for every matrix and the right one picked,
+    which for the few matrices a frame converts is several times faster than masking."""
     m = np.asarray(m, dtype=np.float64)
-    tr = np.trace(m, axis1=-2, axis2=-1)
-    # Four candidate formulas; pick the numerically largest denominator per matrix.
-    cand = np.stack([
-        tr,
-        2 * m[..., 0, 0] - tr,
-        2 * m[..., 1, 1] - tr,
-        2 * m[..., 2, 2] - tr,
-    ], -1)
-    k = np.argmax(cand, axis=-1)
-    q = np.empty(m.shape[:-2] + (4,))
-    s = np.sqrt(np.maximum(1.0 + np.max(cand, axis=-1), 1e-300)) * 2  # 4 * |component|
-    sel = k == 0
-    q[sel] = np.stack([0.25 * s[sel], (m[sel, 2, 1] - m[sel, 1, 2]) / s[sel],
-                       (m[sel, 0, 2] - m[sel, 2, 0]) / s[sel], (m[sel, 1, 0] - m[sel, 0, 1]) / s[sel]], -1)
-    sel = k == 1
-    q[sel] = np.stack([(m[sel, 2, 1] - m[sel, 1, 2]) / s[sel], 0.25 * s[sel],
-                       (m[sel, 0, 1] + m[sel, 1, 0]) / s[sel], (m[sel, 0, 2] + m[sel, 2, 0]) / s[sel]], -1)
-    sel = k == 2
-    q[sel] = np.stack([(m[sel, 0, 2] - m[sel, 2, 0]) / s[sel], (m[sel, 0, 1] + m[sel, 1, 0]) / s[sel],
-                       0.25 * s[sel], (m[sel, 1, 2] + m[sel, 2, 1]) / s[sel]], -1)
-    sel = k == 3
-    q[sel] = np.stack([(m[sel, 1, 0] - m[sel, 0, 1]) / s[sel], (m[sel, 0, 2] + m[sel, 2, 0]) / s[sel],
-                       (m[sel, 1, 2] + m[sel, 2, 1]) / s[sel], 0.25 * s[sel]], -1)
+    flat = m.reshape(m.shape[:-2] + (9,))
+    tr = np.trace(m, axis1=-2, axis2=-1)[..., None]
+    cand = np.concatenate([tr, 2 * flat[..., _DIAGONAL] - tr], -1)
+    s = np.sqrt(np.maximum(1.0 + np.max(cand, axis=-1, keepdims=True), 1e-300)) * 2  # 4 * |largest component|
+    first, second = flat[..., _TERM_FIRST], flat[..., _TERM_SECOND]
+    terms = np.concatenate([0.25 * s, (first[..., :3] - second[..., :3]) / s,
+                            (first[..., 3:] + second[..., 3:]) / s], -1)
+    q = np.take_along_axis(terms, _BRANCH_TERMS[np.argmax(cand, axis=-1)], -1)
     q /= np.linalg.norm(q, axis=-1, keepdims=True)
     return np.where(q[..., :1] < 0, -q, q)
 
