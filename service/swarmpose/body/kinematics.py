@@ -251,10 +251,18 @@ def forward_kinematics(rig: Rig, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     p, b = h.shape[0], len(rig.parents)
     pos = np.empty((p, b, 3))
     pos[:, 0] = h[:, ROOT_TRANSLATION]
-    for bones, above in _bone_levels(np.asarray(rig.parents, dtype=np.int64).tobytes()):
-        offset = (rig.heads[bones] - rig.heads[above])[..., None]  # (n, 3, 1)
+    heads = np.asarray(rig.heads, dtype=np.float64)
+    for bones, above, offset in _level_offsets(np.asarray(rig.parents, dtype=np.int64).tobytes(), heads.tobytes()):
         pos[:, bones] = pos[:, above] + (rot[:, above] @ offset)[..., 0]
     return rot, pos
+
+
+@functools.lru_cache(maxsize=16)
+def _level_offsets(parents: bytes, heads: bytes) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]:
+    """:func:`_bone_levels` with each level's rest offsets from the parents' heads (n, 3, 1) m, from the
+    (B,) int64 parents' and the (B, 3) float64 heads' bytes (a rig's, built once)."""
+    rest = np.frombuffer(heads, dtype=np.float64).reshape(-1, 3)
+    return tuple((bones, above, (rest[bones] - rest[above])[..., None]) for bones, above in _bone_levels(parents))
 
 
 def skinning_transforms(rig: Rig, h: np.ndarray) -> np.ndarray:

@@ -59,7 +59,7 @@ def lifted_limb_seeds(body: SkinnedBody, bases: list[np.ndarray], targets: Joint
     if not chosen:
         return []
     solved, _ = solve_limbs(body, np.asarray(starts, dtype=np.float64), [limb for _, limb in chosen],
-                            np.asarray(goals), steps=STEPS)
+                            np.asarray(goals), steps=STEPS, misses=False)
     seeds = {b: np.array(bases[b], dtype=np.float64) for b, _ in chosen}
     for (b, limb), pose in zip(chosen, solved):
         cols = limb_columns(limb)

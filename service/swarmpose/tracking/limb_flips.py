@@ -104,13 +104,14 @@ def flip_targets(pivot: np.ndarray, middle: np.ndarray, end: np.ndarray) -> list
 
 
 def solve_limbs(body: SkinnedBody, pose: np.ndarray, limbs: Sequence[tuple[str, str, str]],
-                targets: np.ndarray, steps: int = STEPS) -> tuple[np.ndarray, np.ndarray]:
+                targets: np.ndarray, steps: int = STEPS, misses: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
     """K copies of ``pose`` (36,), each with one limb's 4 angles (:func:`limb_columns`) moved so
     that its middle and end points reach their targets by ``steps`` Gauss-Newton steps; ``pose``
     (K, 36): each candidate solved from its own start.
 
     limbs: K (pivot, middle, end) point names out of :data:`FLIP_LIMBS`; targets: (K, 2, 3) m, the
-    middle's and the end's. Returns the solved poses (K, 36) and each one's larger miss (K,) m."""
+    middle's and the end's. Returns the solved poses (K, 36) and each one's larger miss (K,) m (None
+    without ``misses``: one forward kinematics fewer, for a caller that keeps every solution)."""
     k = len(limbs)
     pose = np.asarray(pose, dtype=np.float64)
     if pose.shape not in ((36,), (k, 36)):
@@ -137,6 +138,8 @@ def solve_limbs(body: SkinnedBody, pose: np.ndarray, limbs: Sequence[tuple[str, 
         normal = np.einsum("kri,krj->kij", jac, jac) + DAMPING * np.eye(4)
         step = np.linalg.solve(normal, -np.einsum("kri,kr->ki", jac, residual)[..., None])[..., 0]
         x[rows, cols] = np.clip(x[rows, cols] + step, lo, hi)
+    if not misses:
+        return x, None
     miss = np.linalg.norm((reach(x)[0] - goal).reshape(k, 2, 3), axis=2).max(axis=1)
     return x, miss
 
