@@ -181,7 +181,7 @@ class SkinnedBody:
             out = skinning_transforms(self.rig, h)
             out.setflags(write=False)
             return out
-        key = h.tobytes() + bytes(str(h.shape), "ascii")
+        key = h.tobytes()
         out = self._memo.get(key)
         if out is None:
             out = skinning_transforms(self.rig, h)
