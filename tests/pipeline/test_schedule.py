@@ -96,3 +96,31 @@ def test_a_segmenting_detection_starts_by_its_own_time(monkeypatch):
     timing.detected(0.08, segmented=True)
     assert timing.wait_s(segmenting=True) == pytest.approx(0.1 - 0.08)
     assert timing.wait_s(segmenting=False) == pytest.approx(0.1 - 0.02)
+
+
+def test_the_tracker_waits_for_a_newer_frame_only_when_it_is_due_soon(monkeypatch):
+    """fresher_s against the rule worked out by hand: due within half of how much newer the frame is
+    and within MAX_WAIT_S, the wait is what is left plus WAIT_SLACK_S, capped by that limit."""
+    from swarmpose.pipeline.schedule import MAX_WAIT_S, WAIT_SHARE, WAIT_SLACK_S
+
+    now = [50.0]
+    monkeypatch.setattr(time, "monotonic", lambda: now[0])
+    timing = JustInTime()
+    held = 1_000_000_000  # the capture time (ns) of the frame the tracker is about to take
+    assert timing.fresher_s(held) is None  # nothing in detection
+    timing.detected(0.020)  # a whole frame's detection takes 20 ms
+    timing.detecting(now[0], False, held + 33_000_000)  # the next camera frame, 33 ms newer, just taken
+    now[0] += 0.017
+    assert timing.fresher_s(held) == pytest.approx(0.003 + WAIT_SLACK_S)  # due in 3 ms: wait for it
+    now[0] -= 0.015
+    assert timing.fresher_s(held) is None  # due in 18 ms, more than half of 33 ms: not worth it
+    now[0] += 0.015
+    assert timing.fresher_s(held + 33_000_000) is None  # not newer than the frame held
+    timing.detecting(now[0] - 0.021, False, held + 200_000_000)  # much newer, overdue by 1 ms
+    assert timing.fresher_s(held) == pytest.approx(min(WAIT_SLACK_S, WAIT_SHARE * 0.2, MAX_WAIT_S))
+    timing.detecting(now[0], True, held + 200_000_000)  # a segmented frame, no segmented time known yet:
+    assert timing.fresher_s(held) == pytest.approx(MAX_WAIT_S)  # the whole frames' 20 ms, +5 capped at 25
+    timing.detected(0.060, True)
+    assert timing.fresher_s(held) is None  # done: nothing in detection any more
+    timing.detecting(now[0], True, held + 200_000_000)
+    assert timing.fresher_s(held) is None  # a segmented frame takes 60 ms: longer than anyone waits

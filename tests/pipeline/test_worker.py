@@ -368,3 +368,51 @@ def test_a_looped_recording_starts_its_tracks_afresh(wave_sequence, body):
     states = [(m["frame"], m["bodies"][0]["state"]) for m in sink.frames]
     assert [s for f, s in states if f == 0] == ["init", "init"]
     assert all(s == "tracking" for f, s in states if f != 0)
+
+
+def test_handover_get_gives_up_after_its_timeout():
+    slot = Handover(drop_stale=True)
+    started = time.monotonic()
+    assert slot.get(timeout=0.05) is None and time.monotonic() - started >= 0.05
+    threading.Timer(0.02, slot.put, (7,)).start()
+    assert slot.get(timeout=2.0) == 7  # an item that comes within the timeout
+    slot.put(8)
+    assert slot.get(timeout=0.0) == 8  # one waiting already: no wait at all
+    slot.finish()
+    assert slot.get(timeout=0.05) is END
+
+
+def test_live_detection_holds_an_early_frame_until_due_and_takes_a_newer_one_then(wave_sequence, body):
+    """A frame that came before detection is due gives way to one that came by then (counted as
+    dropped); without a newer one it is detected as it is."""
+    from swarmpose.pipeline.worker import Received
+
+    worker = make_worker(wave_sequence, body, [Collect()], drop_stale=True)
+    timing = worker._timing
+    timing.track_s, timing.detect_s = 0.08, {False: 0.02}
+    timing.tracking()  # the tracker just took a frame: detection is due in 60 ms
+    early, newer = Received("early", 1), Received("newer", 2)
+    threading.Timer(0.02, worker._acquired.put, (newer,)).start()
+    started = time.monotonic()
+    assert worker._newest_when_due(early, False) is newer
+    assert time.monotonic() - started >= 0.05 and worker.stats.dropped == 1
+    timing.tracking()
+    assert worker._newest_when_due(early, False) is early and worker.stats.dropped == 1
+    timing.tracked()  # the tracker is idle: a frame is taken at once
+    started = time.monotonic()
+    assert worker._newest_when_due(early, False) is early and time.monotonic() - started < 0.04
+
+
+def test_the_live_tracker_waits_for_a_newer_frame_about_to_be_detected(wave_sequence, body):
+    from swarmpose.pipeline.worker import Received
+
+    worker = make_worker(wave_sequence, body, [Collect()], drop_stale=True)
+    timing = worker._timing
+    timing.detect_s = {False: 0.02}
+    held, newer = Received("held", 1_000_000_000), Received("newer", 1_033_000_000)
+    timing.detecting(time.monotonic() - 0.015, False, newer.received_ns)  # due in 5 ms
+    threading.Timer(0.004, worker._detected.put, (newer,)).start()
+    assert worker._fresher(held) is newer and worker.stats.dropped == 1
+    timing.detecting(time.monotonic(), False, newer.received_ns)  # due in 20 ms: more than half of 33 ms
+    started = time.monotonic()
+    assert worker._fresher(held) is held and time.monotonic() - started < 0.01

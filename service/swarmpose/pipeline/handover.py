@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 END = object()
 """What :meth:`Handover.get` returns after the last item (or after an abort)."""
@@ -39,11 +40,16 @@ class Handover:
             self._cond.notify_all()
             return not dropped
 
-    def get(self) -> object:
-        """The next item, waiting for it; END after ``finish()`` or ``abort()``."""
+    def get(self, timeout: float | None = None) -> object:
+        """The next item, waiting for it; END after ``finish()`` or ``abort()``; with ``timeout`` (s),
+        None when nothing came within it."""
+        deadline = None if timeout is None else time.monotonic() + timeout
         with self._cond:
             while not self._full and not self._finished and not self._aborted:
-                self._cond.wait()
+                left = None if deadline is None else deadline - time.monotonic()
+                if left is not None and left <= 0:
+                    return None
+                self._cond.wait(left)
             if self._aborted or not self._full:
                 return END
             item, self._item, self._full = self._item, None, False

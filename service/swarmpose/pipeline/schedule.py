@@ -13,6 +13,11 @@ few frames' waits, and the frame detected at the start of each would wait there 
 frame's time. The median ignores the odd slow frame. Detection's own time is a running mean, one for
 the frames it segments and one for those it detects whole (a person tracked alone is segmented every
 few frames only, and a segmented frame's detection takes several times as long).
+
+A newer frame can still be in detection when the tracker finishes: detection took it when it came,
+and it comes at the camera's own moments, not the tracker's. The tracker then waits for it when it is
+due within :data:`WAIT_SHARE` of how much newer it is and at most :data:`MAX_WAIT_S`
+(:meth:`JustInTime.fresher_s`): a frame one camera period fresher for a few milliseconds of waiting.
 """
 
 from __future__ import annotations
@@ -26,6 +31,12 @@ from swarmpose.tracking.budget import running_mean
 
 RECENT_FRAMES = 9
 """How many of the tracker's last frames the median tracking time is taken over."""
+WAIT_SHARE = 0.5
+"""The tracker waits for a newer frame in detection at most this share of how much newer it is."""
+MAX_WAIT_S = 0.025
+"""...and never longer than this (s)."""
+WAIT_SLACK_S = 0.005
+"""Beyond a newer frame's due end, how much longer the tracker gives its detection (within the limits)."""
 
 
 class JustInTime:
@@ -40,6 +51,7 @@ class JustInTime:
         self.detect_s: dict[bool, float] = {}
         """The running mean detection time (s) of segmented (True) and whole-frame (False) detections."""
         self._tracking_since: float | None = None
+        self._detecting: tuple[float, bool, int] | None = None  # (started, segmented, captured ns)
         self.idle = threading.Event()
         """Set while the tracker is between frames (a waiting detection wakes when it finishes early)."""
         self.idle.set()
@@ -59,10 +71,31 @@ class JustInTime:
             self._tracking_since = None
             self.idle.set()
 
+    def detecting(self, started: float, segmented: bool, captured_ns: int) -> None:
+        """Detection is on a frame captured at ``captured_ns`` (wall clock, ns) since ``started``
+        (``time.monotonic()``, where its time is counted from); ``segmented``: it segments it."""
+        with self._lock:
+            self._detecting = (started, segmented, captured_ns)
+
     def detected(self, seconds: float, segmented: bool = False) -> None:
         """A detection took ``seconds``; ``segmented``: it segmented its frame."""
         with self._lock:
             self.detect_s[segmented] = running_mean(self.detect_s.get(segmented), seconds)
+            self._detecting = None
+
+    def fresher_s(self, captured_ns: int) -> float | None:
+        """How long the tracker, about to take a frame captured at ``captured_ns``, should wait for the
+        newer frame in detection (s); None: none is, or it is not worth the wait (module docstring)."""
+        with self._lock:
+            if self._detecting is None:
+                return None
+            started, segmented, newer_ns = self._detecting
+            detect_s = self.detect_s.get(segmented, self.detect_s.get(not segmented))
+        if detect_s is None or newer_ns <= captured_ns:
+            return None
+        left = max(started + detect_s - time.monotonic(), 0.0)
+        limit = min(WAIT_SHARE * (newer_ns - captured_ns) * 1e-9, MAX_WAIT_S)
+        return min(left + WAIT_SLACK_S, limit) if left <= limit else None
 
     def wait(self, segmenting: bool = False) -> None:
         """Wait until detection should take the next frame: :meth:`wait_s`, or less when the tracker

@@ -262,11 +262,16 @@ class Worker:
     def _detect(self) -> None:
         try:
             while True:
+                segmenting = self.pipeline.segments_next()
                 if self.drop_stale:  # live: just in time for the tracker
-                    self._timing.wait(self.pipeline.segments_next())
+                    self._timing.wait(segmenting)
                     if self._stop.is_set():
                         return
                 got = self._acquired.get()
+                if self.drop_stale and got is not END:
+                    got = self._newest_when_due(got, segmenting)
+                    if self._stop.is_set():
+                        return
                 started = time.monotonic()
                 if got is END:
                     return
@@ -278,6 +283,7 @@ class Worker:
                         self._deferred_skips += 1
                         warn_skipped(self.source_uri, got.item, self._deferred_skips)
                 if isinstance(got.item, Frame):
+                    self._timing.detecting(started, segmenting, got.received_ns)
                     got.detection = self.pipeline.detect(got.item)
                     self._timing.detected(time.monotonic() - started, got.detection.segment_ms > 0)
                     if got.detection.note:
@@ -295,7 +301,9 @@ class Worker:
                 got = self._detected.get()
                 if got is END:
                     return
-                if not self.drop_stale:  # replay: leave out the wait for the previous frame's tracking
+                if self.drop_stale:
+                    got = self._fresher(got)
+                else:  # replay: leave out the wait for the previous frame's tracking
                     got.received_ns += time.time_ns() - got.detected_ns
                 if got.opening != self._tracked_opening:  # the recording started over (or the camera came back):
                     self.pipeline.reset()                    # its people are new, where the old ones were is no help
@@ -305,6 +313,30 @@ class Worker:
                 self._timing.tracked()
         finally:
             self._done.set()
+
+    def _newest_when_due(self, got: Received, segmenting: bool) -> Received:
+        """Live: a frame that came before detection is due (the tracker took the last one meanwhile)
+        waits until it is due, then gives way to a newer one if one came (the one held is dropped)."""
+        if self._timing.wait_s(segmenting) <= 0:
+            return got
+        self._timing.wait(segmenting)
+        newer = self._acquired.get(timeout=0.0)
+        if newer is None or newer is END:  # none came, or the source ended (the next get says so again)
+            return got
+        self.stats.update(dropped=1)
+        return newer
+
+    def _fresher(self, got: Received) -> Received:
+        """Live: ``got``, or the newer frame in detection when it is due soon enough to wait for
+        (:meth:`~.schedule.JustInTime.fresher_s`); ``got`` is then a dropped frame."""
+        wait = self._timing.fresher_s(got.received_ns)
+        if wait is None:
+            return got
+        newer = self._detected.get(timeout=wait)
+        if newer is None or newer is END:  # not in time, or the source ended (the next get says so again)
+            return got
+        self.stats.update(dropped=1)
+        return newer
 
     def _result(self, got: Received):
         """The frame result of one received item, counted."""
