@@ -390,17 +390,17 @@ def test_live_detection_holds_an_early_frame_until_due_and_takes_a_newer_one_the
     worker = make_worker(wave_sequence, body, [Collect()], drop_stale=True)
     timing = worker._timing
     timing.track_s, timing.detect_s = 0.08, {False: 0.02}
-    timing.tracking()  # the tracker just took a frame: detection is due in 60 ms
     early, newer = Received("early", 1), Received("newer", 2)
-    threading.Timer(0.02, worker._acquired.put, (newer,)).start()
     started = time.monotonic()
+    timing.tracking()  # the tracker just took a frame: detection is due in 60 ms
+    worker._acquired.put(newer)  # a newer frame comes meanwhile
     assert worker._newest_when_due(early, False) is newer
-    assert time.monotonic() - started >= 0.05 and worker.stats.dropped == 1
+    assert time.monotonic() - started >= 0.06 - 1e-3 and worker.stats.dropped == 1
     timing.tracking()
     assert worker._newest_when_due(early, False) is early and worker.stats.dropped == 1
-    timing.tracked()  # the tracker is idle: a frame is taken at once
-    started = time.monotonic()
-    assert worker._newest_when_due(early, False) is early and time.monotonic() - started < 0.04
+    timing.tracked()  # the tracker is idle: a frame is taken at once, without looking for another
+    worker._acquired.put(newer)
+    assert worker._newest_when_due(early, False) is early and worker._acquired.get(timeout=0.0) is newer
 
 
 def test_the_live_tracker_waits_for_a_newer_frame_about_to_be_detected(wave_sequence, body):
@@ -411,8 +411,8 @@ def test_the_live_tracker_waits_for_a_newer_frame_about_to_be_detected(wave_sequ
     timing.detect_s = {False: 0.02}
     held, newer = Received("held", 1_000_000_000), Received("newer", 1_033_000_000)
     timing.detecting(time.monotonic() - 0.015, False, newer.received_ns)  # due in 5 ms
-    threading.Timer(0.004, worker._detected.put, (newer,)).start()
+    worker._detected.put(newer)
     assert worker._fresher(held) is newer and worker.stats.dropped == 1
     timing.detecting(time.monotonic(), False, newer.received_ns)  # due in 20 ms: more than half of 33 ms
-    started = time.monotonic()
-    assert worker._fresher(held) is held and time.monotonic() - started < 0.01
+    worker._detected.put(newer)
+    assert worker._fresher(held) is held and worker._detected.get(timeout=0.0) is newer  # not even looked at

@@ -262,7 +262,10 @@ def _level_offsets(parents: bytes, heads: bytes) -> tuple[tuple[np.ndarray, np.n
     """:func:`_bone_levels` with each level's rest offsets from the parents' heads (n, 3, 1) m, from the
     (B,) int64 parents' and the (B, 3) float64 heads' bytes (a rig's, built once)."""
     rest = np.frombuffer(heads, dtype=np.float64).reshape(-1, 3)
-    return tuple((bones, above, (rest[bones] - rest[above])[..., None]) for bones, above in _bone_levels(parents))
+    levels = tuple((bones, above, (rest[bones] - rest[above])[..., None]) for bones, above in _bone_levels(parents))
+    for _, _, offset in levels:
+        offset.setflags(write=False)  # cached: shared by every call
+    return levels
 
 
 def skinning_transforms(rig: Rig, h: np.ndarray) -> np.ndarray:

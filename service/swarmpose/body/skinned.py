@@ -174,22 +174,28 @@ class SkinnedBody:
     def transforms(self, h: np.ndarray) -> np.ndarray:
         """Bone transforms (P, B, 3, 4) for poses ``h`` (P, 36), read-only.
 
-        A single pose's are remembered (the last :data:`POSE_MEMO` ones; the body is immutable, so
-        they stay right): a frame's steps pose the same few poses again and again."""
+        A single pose's are remembered, up to :data:`POSE_MEMO` of them, the oldest given up first (the
+        body is immutable, so they stay right): a frame's steps pose the same few poses again and again."""
         h = np.atleast_2d(np.asarray(h, dtype=np.float64))
-        if h.shape[0] != 1:
-            out = skinning_transforms(self.rig, h)
-            out.setflags(write=False)
-            return out
-        key = h.tobytes()
-        out = self._memo.get(key)
+        key = h.tobytes() if h.shape[0] == 1 else None
+        out = None if key is None else self._memo.get(key)
         if out is None:
             out = skinning_transforms(self.rig, h)
             out.setflags(write=False)
-            if len(self._memo) >= POSE_MEMO:
-                self._memo.clear()  # atomic, whichever thread poses this body
-            self._memo[key] = out
+            if key is not None:
+                self._remember(key, out)
         return out
+
+    def _remember(self, key: bytes, transforms: np.ndarray) -> None:
+        """Keep one pose's ``transforms``, giving up the oldest beyond :data:`POSE_MEMO` (several threads
+        may pose one body: a race costs at most a result given up early)."""
+        memo = self._memo
+        memo[key] = transforms
+        while len(memo) > POSE_MEMO:
+            try:
+                memo.pop(next(iter(memo)), None)
+            except (RuntimeError, StopIteration):  # another thread changed it meanwhile
+                break
 
     def pose(self, h: np.ndarray, skinning: str = "lbs") -> np.ndarray:
         """Posed vertices (P, V, 3) in the camera frame for poses (P, 36); ``skinning`` lbs|dqs."""

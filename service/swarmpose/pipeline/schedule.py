@@ -71,31 +71,36 @@ class JustInTime:
             self._tracking_since = None
             self.idle.set()
 
-    def detecting(self, started: float, segmented: bool, captured_ns: int) -> None:
-        """Detection is on a frame captured at ``captured_ns`` (wall clock, ns) since ``started``
+    def detecting(self, started: float, segmented: bool, received_ns: int) -> None:
+        """Detection is on a frame taken from the source at ``received_ns`` (wall clock, ns) since ``started``
         (``time.monotonic()``, where its time is counted from); ``segmented``: it segments it."""
         with self._lock:
-            self._detecting = (started, segmented, captured_ns)
+            self._detecting = (started, segmented, received_ns)
 
     def detected(self, seconds: float, segmented: bool = False) -> None:
-        """A detection took ``seconds``; ``segmented``: it segmented its frame."""
+        """A detection took ``seconds`` and its frame is handed over; ``segmented``: it segmented its frame."""
         with self._lock:
             self.detect_s[segmented] = running_mean(self.detect_s.get(segmented), seconds)
             self._detecting = None
 
-    def fresher_s(self, captured_ns: int) -> float | None:
-        """How long the tracker, about to take a frame captured at ``captured_ns``, should wait for the
-        newer frame in detection (s); None: none is, or it is not worth the wait (module docstring)."""
+    def fresher_s(self, received_ns: int) -> float | None:
+        """How long the tracker, about to take a frame taken from the source at ``received_ns``, should
+        wait for the newer frame in detection (s); None: none is, or it is not worth the wait (module
+        docstring)."""
         with self._lock:
             if self._detecting is None:
                 return None
             started, segmented, newer_ns = self._detecting
-            detect_s = self.detect_s.get(segmented, self.detect_s.get(not segmented))
-        if detect_s is None or newer_ns <= captured_ns:
+            detect_s = self._detect_time(segmented)
+        if detect_s is None or newer_ns <= received_ns:
             return None
         left = max(started + detect_s - time.monotonic(), 0.0)
-        limit = min(WAIT_SHARE * (newer_ns - captured_ns) * 1e-9, MAX_WAIT_S)
+        limit = min(WAIT_SHARE * (newer_ns - received_ns) * 1e-9, MAX_WAIT_S)
         return min(left + WAIT_SLACK_S, limit) if left <= limit else None
+
+    def _detect_time(self, segmented: bool) -> float | None:
+        """(lock held) The running mean time of a detection of this kind, else of the other; None: none yet."""
+        return self.detect_s.get(segmented, self.detect_s.get(not segmented))
 
     def wait(self, segmenting: bool = False) -> None:
         """Wait until detection should take the next frame: :meth:`wait_s`, or less when the tracker
@@ -108,7 +113,7 @@ class JustInTime:
         """How long detection should wait before it takes the next frame (0: take it now); ``segmenting``:
         the next detection segments its frame (the other kind's time until this kind's is known)."""
         with self._lock:
-            detect_s = self.detect_s.get(segmenting, self.detect_s.get(not segmenting))
+            detect_s = self._detect_time(segmenting)
             if self._tracking_since is None or self.track_s is None or detect_s is None:
                 return 0.0
             due = self._tracking_since + self.track_s - detect_s

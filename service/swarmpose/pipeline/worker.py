@@ -282,16 +282,19 @@ class Worker:
                     if isinstance(got.item, SkippedFrame):
                         self._deferred_skips += 1
                         warn_skipped(self.source_uri, got.item, self._deferred_skips)
+                took = None
                 if isinstance(got.item, Frame):
                     self._timing.detecting(started, segmenting, got.received_ns)
                     got.detection = self.pipeline.detect(got.item)
-                    self._timing.detected(time.monotonic() - started, got.detection.segment_ms > 0)
+                    took = time.monotonic() - started
                     if got.detection.note:
                         self.stats.update(detector_errors=1, detector_error=got.detection.note)
                         self.report(got.detection.note)
                 got.detected_ns = time.time_ns()
                 if not self._detected.put(got):
                     self.stats.update(dropped=1)
+                if took is not None:  # after the hand-over: the tracker may wait for it until then
+                    self._timing.detected(took, got.detection.segment_ms > 0)
         finally:
             self._detected.finish()
 
@@ -303,6 +306,8 @@ class Worker:
                     return
                 if self.drop_stale:
                     got = self._fresher(got)
+                    if self._stop.is_set():
+                        return
                 else:  # replay: leave out the wait for the previous frame's tracking
                     got.received_ns += time.time_ns() - got.detected_ns
                 if got.opening != self._tracked_opening:  # the recording started over (or the camera came back):
@@ -316,24 +321,22 @@ class Worker:
 
     def _newest_when_due(self, got: Received, segmenting: bool) -> Received:
         """Live: a frame that came before detection is due (the tracker took the last one meanwhile)
-        waits until it is due, then gives way to a newer one if one came (the one held is dropped)."""
+        waits until it is due, then gives way to a newer one if one came."""
         if self._timing.wait_s(segmenting) <= 0:
             return got
         self._timing.wait(segmenting)
-        newer = self._acquired.get(timeout=0.0)
-        if newer is None or newer is END:  # none came, or the source ended (the next get says so again)
-            return got
-        self.stats.update(dropped=1)
-        return newer
+        return self._newer(got, self._acquired, 0.0)
 
     def _fresher(self, got: Received) -> Received:
         """Live: ``got``, or the newer frame in detection when it is due soon enough to wait for
-        (:meth:`~.schedule.JustInTime.fresher_s`); ``got`` is then a dropped frame."""
+        (:meth:`~.schedule.JustInTime.fresher_s`)."""
         wait = self._timing.fresher_s(got.received_ns)
-        if wait is None:
-            return got
-        newer = self._detected.get(timeout=wait)
-        if newer is None or newer is END:  # not in time, or the source ended (the next get says so again)
+        return got if wait is None else self._newer(got, self._detected, wait)
+
+    def _newer(self, got: Received, slot: Handover, timeout: float) -> Received:
+        """The item ``slot`` gives within ``timeout`` s (``got`` is then a dropped frame), else ``got``."""
+        newer = slot.get(timeout=timeout)
+        if newer is None or newer is END:  # none came, or the source ended (the next get says so again)
             return got
         self.stats.update(dropped=1)
         return newer

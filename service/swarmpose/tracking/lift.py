@@ -50,9 +50,10 @@ def sample_surface_depth(depth: np.ndarray, u: float, v: float, window_px: int, 
     n = vals.size
     if n == 0:
         return float("nan")
-    at = 0.2 * (n - 1)  # the 20th percentile, interpolated between the two values around it
+    at = 0.2 * (n - 1)  # the 20th percentile, interpolated between the two values around it as numpy does
     below = int(at)
-    front = vals[below] + (vals[min(below + 1, n - 1)] - vals[below]) * (at - below)
+    t, a, b = at - below, vals[below], vals[min(below + 1, n - 1)]
+    front = b - (b - a) * (1 - t) if t >= 0.5 else a + (b - a) * t
     near = vals[:np.searchsorted(vals, front + cluster_m, side="right")]  # sorted: the nearest cluster
     half_n = near.size // 2
     return float(near[half_n] if near.size % 2 else (near[half_n - 1] + near[half_n]) / 2)
@@ -63,6 +64,8 @@ def median_depth(depth: np.ndarray, stride: int = 2) -> float | None:
     column (a quarter of a frame's pixels at 2: a window's size needs no more); None when it has none."""
     sample = depth[::stride, ::stride]
     valid = sample[np.isfinite(sample) & (sample > 0)]
+    if not valid.size:  # the valid pixels may all lie between the ones read
+        valid = depth[np.isfinite(depth) & (depth > 0)]
     return float(np.median(valid)) if valid.size else None
 
 
