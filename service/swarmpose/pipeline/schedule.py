@@ -2,10 +2,11 @@
 
 Live, the tracker takes the newest detected frame when it is done with the last one. A frame
 detected as soon as the tracker started waits in between for most of a tracking period, and its
-pose comes that much later. So detection waits until the tracker is due to finish less the time a
-detection takes, then takes the newest frame: the frame is as fresh as it can be when the tracker
-takes it, and detection still runs beside the end of the search. Once that moment has passed and
-the tracker is still busy, detection takes every new frame, so the one waiting stays fresh.
+pose comes that much later. So the frame detection takes waits until the tracker is due to finish
+less the time a detection takes, and then gives way to the newest frame, if another came meanwhile:
+the frame is as fresh as it can be when the tracker takes it, and detection still runs beside the end
+of the search. Once that moment has passed and the tracker is still busy, detection takes every new
+frame at once, so the one waiting stays fresh.
 
 The tracker is due after the median of its last :data:`RECENT_FRAMES` frames. A track's start or a
 re-check takes several times a usual frame; a running mean would carry such a frame into the next

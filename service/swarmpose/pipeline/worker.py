@@ -263,12 +263,8 @@ class Worker:
         try:
             while True:
                 segmenting = self.pipeline.segments_next()
-                if self.drop_stale:  # live: just in time for the tracker
-                    self._timing.wait(segmenting)
-                    if self._stop.is_set():
-                        return
                 got = self._acquired.get()
-                if self.drop_stale and got is not END:
+                if self.drop_stale and got is not END:  # live: just in time for the tracker
                     got = self._newest_when_due(got, segmenting)
                     if self._stop.is_set():
                         return
@@ -320,8 +316,8 @@ class Worker:
             self._done.set()
 
     def _newest_when_due(self, got: Received, segmenting: bool) -> Received:
-        """Live: a frame that came before detection is due (the tracker took the last one meanwhile)
-        waits until it is due, then gives way to a newer one if one came."""
+        """Live: the frame detection took waits until detection is due (:mod:`~.schedule`), then gives
+        way to the newest one, if another came meanwhile; past that moment it is detected at once."""
         if self._timing.wait_s(segmenting) <= 0:
             return got
         self._timing.wait(segmenting)
