@@ -21,11 +21,12 @@ black padding, resized to the network's input:
 
 * MoveNet: with a ``box`` ([x0, y0, x1, y1] px), the square around it enlarged by
   ``margin`` (default 1.25); without, the whole frame padded to a square (centred).
-* BlazePose: with a ``box``, the square around it enlarged by ``margin`` (default 1.25,
-  MediaPipe's region-of-interest scale); without, the box of the previous detection's
-  keypoints (score > 0.5) enlarged the same way, so that the detector follows a person
-  from frame to frame like MediaPipe's tracking mode; without either (first frame, or
-  after the pose flag said the person was lost), the whole frame padded to a square.
+* BlazePose: the region its own last detection of that person gives (its alignment points: the
+  hips' centre and the body's circle, a square 1.25x the circle turned with the body's axis,
+  :mod:`swarmpose.detect.regions`), as MediaPipe's tracking mode crops; with a ``box``, the newest
+  remembered region centred in the box and of about its size, else the square around the box
+  enlarged by ``margin`` (default 1.25); without a box, the newest region; without either (first
+  frame, or after the pose flag said the person was lost), the whole frame padded to a square.
 
 Where a network would see the whole frame (no box, nothing to follow), it runs twice when
 ``refine`` is on (the default): once on the whole frame, then on the square around the
@@ -49,15 +50,22 @@ import numpy as np
 from swarmpose.body.skeleton import BLAZEPOSE33, COCO17, KeypointLayout
 from swarmpose.core.errors import DetectorError
 from swarmpose.detect.joints import Joints2D
+from swarmpose.detect.regions import TurnedSquare, aligned_square
 
 DEFAULT_MARGIN = 1.25
 """A box is enlarged by this factor (on its larger side) into the square the network sees."""
 
-PREVIOUS_MIN_SCORE = 0.5
-"""Keypoints of the previous detection above this score define the next BlazePose crop."""
-
 REFINE_MIN_SCORE = 0.2
 """Keypoints of a whole-frame pass above this score define the crop of the second pass."""
+
+ALIGNMENT_ROWS = (33, 34)
+"""BlazePose's landmark rows of the hips' centre and the body circle's point along its axis."""
+REMEMBERED_REGIONS = 32
+"""BlazePose remembers the regions of this many of its last detections (one per person of a frame: as
+many as `--max-people` allows)."""
+REGION_SIDE_RATIO = (0.5, 3.0)
+"""A remembered region serves a box whose square's side is within this ratio of its own (a body bent
+over or seated keeps its circle while its joints' box shrinks)."""
 
 
 def default_threads() -> int:
@@ -117,7 +125,7 @@ def crop_square(image: np.ndarray, square: Square, size: int) -> np.ndarray:
     return cv2.resize(out, (size, size), interpolation=cv2.INTER_AREA if s > size else cv2.INTER_LINEAR)
 
 
-def keypoint_box(keypoints: np.ndarray, min_score: float = PREVIOUS_MIN_SCORE) -> np.ndarray | None:
+def keypoint_box(keypoints: np.ndarray, min_score: float) -> np.ndarray | None:
     """[x0, y0, x1, y1] px around keypoints (K, 3) with score > ``min_score``; None when fewer than 2."""
     ok = (keypoints[:, 2] > min_score) & np.all(np.isfinite(keypoints[:, :2]), axis=1)
     if ok.sum() < 2:
@@ -146,6 +154,11 @@ class _MoveNet:
     name = "movenet"
     layout = COCO17
     size = 192
+    follows = False
+    """A detection without a box sees the whole frame."""
+
+    def forget(self) -> None:
+        """MoveNet remembers nothing."""
 
     @staticmethod
     def matches(inputs: list[_Port], outputs: list[_Port]) -> bool:
@@ -169,7 +182,8 @@ class _MoveNet:
 
 
 class _BlazePose:
-    """BlazePose full landmark: person crop -> (33, 3) BlazePose keypoints; remembers the last crop."""
+    """BlazePose full landmark: person crop -> (33, 3) BlazePose keypoints; remembers the regions of its
+    last detections (their alignment points, :mod:`swarmpose.detect.regions`)."""
 
     name = "blazepose"
     layout = BLAZEPOSE33
@@ -186,23 +200,55 @@ class _BlazePose:
         self.flag = next(o.name for o in outputs if o.shape == (1, 1))
         self.margin = margin
         self.min_pose_flag = min_pose_flag
-        self.previous: np.ndarray | None = None  # keypoints (33, 3) of the last detection with a person
+        self.regions: list[TurnedSquare] = []  # of the last detections with a person, newest first
+
+    @property
+    def follows(self) -> bool:
+        """Whether a detection without a box crops a remembered region (else the whole frame)."""
+        return bool(self.regions)
+
+    def forget(self) -> None:
+        """Forget the remembered regions."""
+        self.regions.clear()
+
+    def region_for(self, box: np.ndarray | None, square: Square) -> TurnedSquare | None:
+        """The remembered region to crop for ``box`` (None: the newest): the newest whose centre lies in
+        the box and whose side is within :data:`REGION_SIDE_RATIO` of ``square``'s (the box's crop)."""
+        if box is None:
+            return self.regions[0] if self.regions else None
+        lo, hi = REGION_SIDE_RATIO
+        for region in self.regions:
+            inside = box[0] <= region.centre[0] <= box[2] and box[1] <= region.centre[1] <= box[3]
+            if inside and lo <= region.side / square.side <= hi:
+                return region
+        return None
 
     def run(self, session, image: np.ndarray, box: np.ndarray | None) -> np.ndarray:
         h, w = image.shape[:2]
-        if box is None and self.previous is not None:
-            box = keypoint_box(self.previous)
         square = whole_frame(w, h) if box is None else square_around(box, self.margin)
-        tensor = crop_square(image, square, self.size)[None].astype(np.float32) / 255.0
-        landmarks, flag = session.run([self.landmarks, self.flag], {self.input: tensor})
-        lm = landmarks.reshape(39, 5)[:33].astype(np.float64)
-        xy = square.to_frame(lm[:, 0] / self.size, lm[:, 1] / self.size)
-        keypoints = np.concatenate([xy, _sigmoid(lm[:, 3:4])], axis=1)
+        region = self.region_for(box, square)
+        if region is None:
+            tensor = crop_square(image, square, self.size)
+        else:
+            tensor = region.crop(image, self.size)
+        landmarks, flag = session.run([self.landmarks, self.flag],
+                                      {self.input: tensor[None].astype(np.float32) / 255.0})
+        lm = landmarks.reshape(39, 5).astype(np.float64)
+        if region is None:
+            xy = square.to_frame(lm[:, 0] / self.size, lm[:, 1] / self.size)
+        else:
+            xy = region.to_frame(lm[:, :2], self.size)
         if float(np.ravel(flag)[0]) < self.min_pose_flag:
-            self.previous = None
+            if box is None:
+                self.regions.clear()
+            elif region is not None:
+                self.regions.remove(region)
             return np.zeros((33, 3))
-        self.previous = keypoints
-        return keypoints
+        found = aligned_square(xy[ALIGNMENT_ROWS[0]], xy[ALIGNMENT_ROWS[1]])
+        if found is not None:
+            self.regions.insert(0, found)
+            del self.regions[REMEMBERED_REGIONS:]
+        return np.concatenate([xy[:33], _sigmoid(lm[:33, 3:4])], axis=1)
 
 
 ADAPTERS = {a.name: a for a in (_MoveNet, _BlazePose)}
@@ -276,14 +322,14 @@ class OnnxPoseDetector:
                                 f"{image.shape} {image.dtype}")
         box = None if box is None else np.asarray(box, dtype=np.float64).reshape(4)
         try:
-            whole = box is None and getattr(self.adapter, "previous", None) is None
+            whole = box is None and not self.adapter.follows
             keypoints = self.adapter.run(self.session, image, box)
             found = keypoint_box(keypoints, REFINE_MIN_SCORE) if whole and self.refine else None
             if found is not None:
                 refined = self.adapter.run(self.session, image, found)
                 keypoints = refined if refined[:, 2].mean() >= keypoints[:, 2].mean() else keypoints
-                if hasattr(self.adapter, "previous"):  # follow what is returned (None: nobody)
-                    self.adapter.previous = keypoints if keypoints[:, 2].any() else None
+                if not keypoints[:, 2].any():  # nobody after both passes: nothing to follow
+                    self.adapter.forget()
         except DetectorError:
             raise
         except Exception as exc:
@@ -291,9 +337,8 @@ class OnnxPoseDetector:
         return Joints2D(self.layout, keypoints, int(frame.index), int(frame.timestamp_ns))
 
     def reset(self) -> None:
-        """Forget the previous detection (BlazePose then crops the whole frame next time)."""
-        if hasattr(self.adapter, "previous"):
-            self.adapter.previous = None
+        """Forget the previous detections (BlazePose then crops the whole frame next time)."""
+        self.adapter.forget()
 
     def close(self) -> None:
         """Release the onnxruntime session; safe to call twice."""
