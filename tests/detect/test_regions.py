@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from swarmpose.detect.onnx_pose import Square, crop_square, square_around
-from swarmpose.detect.regions import ROI_SCALE, TurnedSquare, aligned_square
+from swarmpose.detect.regions import MIN_RADIUS_PX, ROI_SCALE, RegionMemory, TurnedSquare, aligned_square
 
 
 def _upright(square: Square) -> TurnedSquare:
@@ -49,18 +49,63 @@ def test_a_region_turned_a_quarter_puts_the_body_axis_up_in_the_crop():
     assert crop.sum() == 2 * 255  # nothing else lit: a pure quarter turn, same scale
 
 
-def test_a_region_holds_the_points_of_its_turned_square():
-    region = TurnedSquare((50.0, 50.0), 20.0, (np.sqrt(0.5), -np.sqrt(0.5)))  # turned 45 degrees
-    assert region.holds(np.array([50.0, 50.0]))
-    assert region.holds(np.array([50.0 + 13.0, 50.0]))  # within the half-diagonal (14.1) along x
-    assert not region.holds(np.array([50.0 + 10.0 * np.sqrt(0.5) + 1.0, 50.0 + 10.0 * np.sqrt(0.5) + 1.0]))
-
-
 def test_the_aligned_square_of_two_alignment_points():
     """Side = 2 x the circle's radius x the ROI scale; up from the centre to the rim; none when degenerate."""
     region = aligned_square(np.array([10.0, 50.0]), np.array([10.0 + 30.0, 50.0 - 40.0]))
     assert region.centre == (10.0, 50.0)
     assert region.side == pytest.approx(2 * 50.0 * ROI_SCALE)
     np.testing.assert_allclose(region.up, (0.6, -0.8))
-    assert aligned_square(np.array([5.0, 5.0]), np.array([5.0, 5.5])) is None
+    assert aligned_square(np.array([5.0, 5.0]), np.array([5.0, 5.0 + MIN_RADIUS_PX - 0.5])) is None
     assert aligned_square(np.array([5.0, np.nan]), np.array([5.0, 50.0])) is None
+
+
+def _region(x: float, y: float, side: float = 200.0) -> TurnedSquare:
+    return TurnedSquare((x, y), side, (0.0, -1.0))
+
+
+def test_a_frame_crops_the_regions_of_the_frame_before_it_only():
+    """Regions found on a frame serve the next frame, not the frame itself (its other people, a second
+    pass) nor the frame after the next: a person not found on a frame has no region on the one after."""
+    memory, box = RegionMemory(), np.array([40.0, 20.0, 160.0, 180.0])
+    memory.begin(0)
+    memory.add(_region(100, 100))
+    assert memory.region_for(box, 200.0) is None  # found on this frame
+    memory.begin(0)  # the same frame again (its next person)
+    assert memory.region_for(box, 200.0) is None
+    memory.begin(1)
+    assert memory.region_for(box, 200.0) == _region(100, 100)
+    memory.begin(2)  # nothing was found on frame 1
+    assert memory.region_for(box, 200.0) is None
+    assert memory.region_for(None, 200.0) is None
+
+
+def test_several_people_each_crop_the_region_centred_nearest_their_box():
+    """Two people's regions both centred in one box (people overlapping): the nearer to the box's centre
+    serves it, whichever was found first; a box of another size or elsewhere gets none; without a box,
+    the newest."""
+    memory = RegionMemory()
+    memory.begin(0)
+    mine, other = _region(100, 100), _region(150, 100)
+    memory.add(mine)
+    memory.add(other)
+    memory.begin(1)
+    box = np.array([40.0, 20.0, 160.0, 180.0])  # both centres inside; its centre (100, 100)
+    assert memory.region_for(box, 200.0) is mine
+    assert memory.region_for(np.array([95.0, 95.0, 105.0, 105.0]), 12.5) is None  # mine centred in it, 16x larger
+    assert memory.region_for(np.array([95.0, 95.0, 105.0, 105.0]), 100.0) is mine  # within 0.5-3x
+    assert memory.region_for(np.array([200.0, 20.0, 300.0, 180.0]), 200.0) is None
+    assert memory.region_for(None, 200.0) is other
+
+
+def test_a_discarded_or_cleared_region_serves_no_frame():
+    memory = RegionMemory()
+    memory.begin(0)
+    kept, dropped = _region(100, 100), _region(400, 100)
+    memory.add(kept)
+    memory.add(dropped)
+    memory.discard(dropped)
+    memory.discard(None)
+    memory.begin(1)
+    assert memory.last == (kept,)
+    memory.clear()
+    assert memory.last == () and memory.region_for(None, 200.0) is None

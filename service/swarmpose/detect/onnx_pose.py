@@ -21,12 +21,13 @@ black padding, resized to the network's input:
 
 * MoveNet: with a ``box`` ([x0, y0, x1, y1] px), the square around it enlarged by
   ``margin`` (default 1.25); without, the whole frame padded to a square (centred).
-* BlazePose: the region its own last detection of that person gives (its alignment points: the
-  hips' centre and the body's circle, a square 1.25x the circle turned with the body's axis,
-  :mod:`swarmpose.detect.regions`), as MediaPipe's tracking mode crops; with a ``box``, the newest
-  remembered region centred in the box and of about its size, else the square around the box
-  enlarged by ``margin`` (default 1.25); without a box, the newest region; without either (first
-  frame, or after the pose flag said the person was lost), the whole frame padded to a square.
+* BlazePose: the region its detection of that person on the frame before gave (its alignment
+  points: the hips' centre and the body's circle, a square 1.25x the circle turned with the body's
+  axis, :mod:`swarmpose.detect.regions`), as MediaPipe's tracking mode crops; with a ``box``, of
+  the last frame's regions centred in the box and of about its size the one nearest its centre,
+  else the square around the box enlarged by ``margin`` (default 1.25); without a box, the last
+  frame's newest region; without either (first frame, or after the pose flag said nobody was in
+  the last region), the whole frame padded to a square.
 
 Where a network would see the whole frame (no box, nothing to follow), it runs twice when
 ``refine`` is on (the default): once on the whole frame, then on the square around the
@@ -50,7 +51,7 @@ import numpy as np
 from swarmpose.body.skeleton import BLAZEPOSE33, COCO17, KeypointLayout
 from swarmpose.core.errors import DetectorError
 from swarmpose.detect.joints import Joints2D
-from swarmpose.detect.regions import TurnedSquare, aligned_square
+from swarmpose.detect.regions import RegionMemory, TurnedSquare, aligned_square
 
 DEFAULT_MARGIN = 1.25
 """A box is enlarged by this factor (on its larger side) into the square the network sees."""
@@ -60,12 +61,6 @@ REFINE_MIN_SCORE = 0.2
 
 ALIGNMENT_ROWS = (33, 34)
 """BlazePose's landmark rows of the hips' centre and the body circle's point along its axis."""
-REMEMBERED_REGIONS = 32
-"""BlazePose remembers the regions of this many of its last detections (one per person of a frame: as
-many as `--max-people` allows)."""
-REGION_SIDE_RATIO = (0.5, 3.0)
-"""A remembered region serves a box whose square's side is within this ratio of its own (a body bent
-over or seated keeps its circle while its joints' box shrinks)."""
 
 
 def default_threads() -> int:
@@ -148,17 +143,30 @@ class _Port:
     type: str
 
 
-class _MoveNet:
+class _Adapter:
+    """What a network remembers between detections: here nothing (a detection without a box sees the
+    whole frame). ``begin(stamp)`` starts a frame's detections; ``found`` is the region the last run
+    remembered (None: none), ``discard`` drops it, ``forget`` drops all."""
+
+    follows = False
+    found: TurnedSquare | None = None
+
+    def begin(self, stamp: object) -> None:
+        """Start the detections of frame ``stamp``."""
+
+    def discard(self, region: TurnedSquare | None) -> None:
+        """Drop a region this frame's run remembered."""
+
+    def forget(self) -> None:
+        """Forget what earlier detections left."""
+
+
+class _MoveNet(_Adapter):
     """MoveNet single-pose: whole frame or box -> (17, 3) COCO keypoints."""
 
     name = "movenet"
     layout = COCO17
     size = 192
-    follows = False
-    """A detection without a box sees the whole frame."""
-
-    def forget(self) -> None:
-        """MoveNet remembers nothing."""
 
     @staticmethod
     def matches(inputs: list[_Port], outputs: list[_Port]) -> bool:
@@ -181,9 +189,9 @@ class _MoveNet:
         return np.concatenate([xy, np.clip(out[:, 2:3], 0.0, 1.0)], axis=1)
 
 
-class _BlazePose:
-    """BlazePose full landmark: person crop -> (33, 3) BlazePose keypoints; remembers the regions of its
-    last detections (their alignment points, :mod:`swarmpose.detect.regions`)."""
+class _BlazePose(_Adapter):
+    """BlazePose full landmark: person crop -> (33, 3) BlazePose keypoints; each person's next crop is
+    the region its alignment points gave (:class:`~swarmpose.detect.regions.RegionMemory`)."""
 
     name = "blazepose"
     layout = BLAZEPOSE33
@@ -200,37 +208,27 @@ class _BlazePose:
         self.flag = next(o.name for o in outputs if o.shape == (1, 1))
         self.margin = margin
         self.min_pose_flag = min_pose_flag
-        self.regions: list[TurnedSquare] = []  # of the last detections with a person, newest first
+        self.regions = RegionMemory()
 
     @property
     def follows(self) -> bool:
-        """Whether a detection without a box crops a remembered region (else the whole frame)."""
-        return bool(self.regions)
+        """Whether a detection without a box crops the last frame's region (else the whole frame)."""
+        return bool(self.regions.last)
+
+    def begin(self, stamp: object) -> None:
+        self.regions.begin(stamp)
+
+    def discard(self, region: TurnedSquare | None) -> None:
+        self.regions.discard(region)
 
     def forget(self) -> None:
-        """Forget the remembered regions."""
         self.regions.clear()
-
-    def region_for(self, box: np.ndarray | None, square: Square) -> TurnedSquare | None:
-        """The remembered region to crop for ``box`` (None: the newest): the newest whose centre lies in
-        the box and whose side is within :data:`REGION_SIDE_RATIO` of ``square``'s (the box's crop)."""
-        if box is None:
-            return self.regions[0] if self.regions else None
-        lo, hi = REGION_SIDE_RATIO
-        for region in self.regions:
-            inside = box[0] <= region.centre[0] <= box[2] and box[1] <= region.centre[1] <= box[3]
-            if inside and lo <= region.side / square.side <= hi:
-                return region
-        return None
 
     def run(self, session, image: np.ndarray, box: np.ndarray | None) -> np.ndarray:
         h, w = image.shape[:2]
         square = whole_frame(w, h) if box is None else square_around(box, self.margin)
-        region = self.region_for(box, square)
-        if region is None:
-            tensor = crop_square(image, square, self.size)
-        else:
-            tensor = region.crop(image, self.size)
+        region = self.regions.region_for(box, square.side)
+        tensor = crop_square(image, square, self.size) if region is None else region.crop(image, self.size)
         landmarks, flag = session.run([self.landmarks, self.flag],
                                       {self.input: tensor[None].astype(np.float32) / 255.0})
         lm = landmarks.reshape(39, 5).astype(np.float64)
@@ -238,16 +236,14 @@ class _BlazePose:
             xy = square.to_frame(lm[:, 0] / self.size, lm[:, 1] / self.size)
         else:
             xy = region.to_frame(lm[:, :2], self.size)
+        self.found = None
         if float(np.ravel(flag)[0]) < self.min_pose_flag:
-            if box is None:
+            if box is None:  # nobody where the last frame's person was: the whole frame next
                 self.regions.clear()
-            elif region is not None:
-                self.regions.remove(region)
             return np.zeros((33, 3))
-        found = aligned_square(xy[ALIGNMENT_ROWS[0]], xy[ALIGNMENT_ROWS[1]])
-        if found is not None:
-            self.regions.insert(0, found)
-            del self.regions[REMEMBERED_REGIONS:]
+        self.found = aligned_square(xy[ALIGNMENT_ROWS[0]], xy[ALIGNMENT_ROWS[1]])
+        if self.found is not None:
+            self.regions.add(self.found)
         return np.concatenate([xy[:33], _sigmoid(lm[:33, 3:4])], axis=1)
 
 
@@ -322,12 +318,18 @@ class OnnxPoseDetector:
                                 f"{image.shape} {image.dtype}")
         box = None if box is None else np.asarray(box, dtype=np.float64).reshape(4)
         try:
+            self.adapter.begin(frame.index)
             whole = box is None and not self.adapter.follows
             keypoints = self.adapter.run(self.session, image, box)
             found = keypoint_box(keypoints, REFINE_MIN_SCORE) if whole and self.refine else None
             if found is not None:
+                first = self.adapter.found
                 refined = self.adapter.run(self.session, image, found)
-                keypoints = refined if refined[:, 2].mean() >= keypoints[:, 2].mean() else keypoints
+                if refined[:, 2].mean() >= keypoints[:, 2].mean():  # the next frame follows the pass kept
+                    keypoints = refined
+                    self.adapter.discard(first)
+                else:
+                    self.adapter.discard(self.adapter.found)
                 if not keypoints[:, 2].any():  # nobody after both passes: nothing to follow
                     self.adapter.forget()
         except DetectorError:

@@ -19,6 +19,11 @@ import numpy as np
 
 ROI_SCALE = 1.25
 """The crop's side over the alignment circle's diameter (MediaPipe's pose ROI scale)."""
+MIN_RADIUS_PX = 8.0
+"""Alignment points closer than this give no region."""
+SIDE_RATIO = (0.5, 3.0)
+"""A region serves a box whose square's side is within this ratio of its own (a body bent over or
+seated keeps its circle while its joints' box shrinks)."""
 
 
 @dataclass(frozen=True)
@@ -50,19 +55,63 @@ class TurnedSquare:
         offset = (np.asarray(xy, float) - size / 2) * (self.side / size)
         return np.asarray(self.centre, float) + offset @ self._axes().T
 
-    def holds(self, point: np.ndarray) -> bool:
-        """Whether frame pixel ``point`` (2,) lies inside the region."""
-        local = (np.asarray(point, float) - self.centre) @ self._axes()
-        return bool(np.all(np.abs(local) <= self.side / 2))
-
 
 def aligned_square(centre: np.ndarray, rim: np.ndarray, scale: float = ROI_SCALE) -> TurnedSquare | None:
     """The region of a body from its alignment points (px): the hips' ``centre`` (2,) and the point
-    ``rim`` (2,) on the circle around the body along its axis; None when they coincide or are not finite."""
+    ``rim`` (2,) on the circle around the body along its axis; None when they are not finite or the
+    circle's radius is under :data:`MIN_RADIUS_PX` (no person's crop)."""
     centre, rim = np.asarray(centre, float), np.asarray(rim, float)
     axis = rim - centre
     radius = float(np.hypot(*axis))
-    if not (np.all(np.isfinite(axis)) and radius > 1.0):
+    if not (np.all(np.isfinite(axis)) and radius >= MIN_RADIUS_PX):
         return None
     up = axis / radius
     return TurnedSquare((float(centre[0]), float(centre[1])), 2.0 * radius * scale, (float(up[0]), float(up[1])))
+
+
+class RegionMemory:
+    """The regions a network's detections gave, for the next frame's crops: a frame is cropped from the
+    regions of the frame detected before it (one per person found there), never from its own, so the
+    people of one frame and a second pass on it do not crop each other's. ``begin(stamp)`` starts a
+    frame (a new ``stamp``: the one before becomes the last); ``add`` keeps a region of this frame."""
+
+    def __init__(self, side_ratio: tuple[float, float] = SIDE_RATIO):
+        self.side_ratio = side_ratio
+        self._stamp: object = None
+        self._last: list[TurnedSquare] = []
+        self._now: list[TurnedSquare] = []
+
+    def begin(self, stamp: object) -> None:
+        """Start detecting the frame ``stamp`` (the same stamp again: the same frame)."""
+        if stamp != self._stamp:
+            self._stamp, self._last, self._now = stamp, self._now, []
+
+    @property
+    def last(self) -> tuple[TurnedSquare, ...]:
+        """The regions of the frame before this one, newest first."""
+        return tuple(self._last)
+
+    def region_for(self, box: np.ndarray | None, square_side: float) -> TurnedSquare | None:
+        """The last frame's region to crop for ``box`` [x0, y0, x1, y1] px whose crop square has
+        ``square_side`` px: of those centred in the box and within :attr:`side_ratio` of that side, the
+        one centred nearest the box's centre; without a box, the newest; None where none is."""
+        if box is None:
+            return self._last[0] if self._last else None
+        lo, hi = self.side_ratio
+        middle = np.array([(box[0] + box[2]) / 2, (box[1] + box[3]) / 2])
+        fits = [r for r in self._last if box[0] <= r.centre[0] <= box[2] and box[1] <= r.centre[1] <= box[3]
+                and lo <= r.side / square_side <= hi]
+        return min(fits, key=lambda r: float(np.hypot(*(np.asarray(r.centre) - middle))), default=None)
+
+    def add(self, region: TurnedSquare) -> None:
+        """Keep ``region``, found on this frame, for the next."""
+        self._now.insert(0, region)
+
+    def discard(self, region: TurnedSquare | None) -> None:
+        """Drop ``region``, found on this frame (a pass whose keypoints were not kept); None: nothing."""
+        if region is not None and region in self._now:
+            self._now.remove(region)
+
+    def clear(self) -> None:
+        """Forget every region."""
+        self._last, self._now = [], []
