@@ -45,14 +45,18 @@ def test_a_box_is_held_once_it_has_stayed_within_the_share_of_its_larger_side():
 
 
 class BoxRecorder:
-    """The real detector, noting the box it is asked to look in."""
+    """The real detector, noting the box it is asked to look in, and its calls."""
 
     def __init__(self, inner):
-        self.inner, self.boxes = inner, []
+        self.inner, self.boxes, self.calls = inner, [], []
 
     def detect(self, frame, box=None):
         self.boxes.append(None if box is None else np.array(box, dtype=float))
+        self.calls.append("detect")
         return self.inner.detect(frame, box)
+
+    def reset(self):
+        self.calls.append("reset")
 
     def close(self):
         self.inner.close()
@@ -83,3 +87,21 @@ def test_the_detector_looks_in_one_box_while_the_person_stands_still(still_perso
         assert all(changes)
     else:  # frame 0's box is the anchor; frames 1..4 stay near it and are given as they are; from frame 5 on, held
         assert all(changes[:4]) and all(np.array_equal(b, still[0]) for b in still[5:])
+
+
+def test_a_reset_pipeline_resets_its_detector_before_the_next_detection(still_person):
+    """A camera that came back or a recording that starts over: the detector forgets its crops (BlazePose
+    its regions) once, in the detection's own call, before looking at the next frame as a whole."""
+    body = load_body("builtin")
+    source = open_source(f"folder:{still_person}")
+    detector = BoxRecorder(make_detector("simulated", source))
+    pipeline = FramePipeline(detector, lambda intrinsics, body_id: BodyTracker(body, intrinsics, SMALL, body_id),
+                             max_people=1)
+    frames = list(source)[:4]
+    for frame in frames[:2]:
+        pipeline.process(frame)
+    pipeline.reset()
+    for frame in frames[2:]:
+        pipeline.process(frame)
+    assert detector.calls == ["detect", "detect", "reset", "detect", "detect"]
+    assert detector.boxes[1] is not None and detector.boxes[2] is None

@@ -161,6 +161,7 @@ class FramePipeline:
         """The time a frame's tracking may take (ms), shared by its people (live; 0: the configured search)."""
         self._box_lock = threading.Lock()
         self._alone = 0  # frames since a segmentation found one person alone (0: it did not; used live only)
+        self._detector_stale = False  # reset() since the last detection: the detector forgets its crops first
         self._warned_empty = False  # a depth image without valid pixels is logged once
 
     @property
@@ -208,6 +209,10 @@ class FramePipeline:
     def _detect(self, frame: Frame) -> Detection:
         """:meth:`detect` without the floor of the world frame."""
         t0 = time.perf_counter()
+        with self._box_lock:
+            stale, self._detector_stale = self._detector_stale, False
+        if stale and hasattr(self.detector, "reset"):  # in the detection's thread, as every detector call
+            self.detector.reset()
         segmentation, segment_ms, props = None, 0.0, None
         unsegmented = self.max_people > 1 and self._unsegmented()
         if self.max_people > 1 and not unsegmented:
@@ -371,8 +376,9 @@ class FramePipeline:
         return self.track(item, self.detect(item), received_ns)
 
     def reset(self) -> None:
-        """Forget the tracks, the bodies fitted to their people, the detector's box and the props seen
-        (a camera that came back may stand elsewhere)."""
+        """Forget the tracks, the bodies fitted to their people, the detector's box, what the detector
+        remembers of earlier frames (its next detection resets it first) and the props seen (a camera
+        that came back may stand elsewhere)."""
         if self.tracker is not None:
             self.tracker.new_person()
         if self.people is not None:
@@ -382,6 +388,7 @@ class FramePipeline:
         with self._box_lock:
             self._box, self._boxes, self._alone = None, [], 0
             self._steady.reset()
+            self._detector_stale = True
 
 
 def skipped_result(item: SkippedFrame, received_ns: int = 0) -> FrameResult:
