@@ -185,6 +185,27 @@ def test_blazepose_crops_a_turned_body_turned(photo):
     assert max(errors) < BLAZEPOSE_COCO_BOUND_PX + 4.0
 
 
+@needs_assets
+def test_blazepose_follows_the_pass_it_kept_and_not_a_crop_that_found_nobody(photo):
+    """A whole-frame detection with its second pass leaves one region, that of the pass it returned
+    (the two passes' regions differ); a crop with a box that finds nobody (an empty image) leaves none,
+    so the next frame crops the box's square."""
+    frame, _, box = photo
+    det = OnnxPoseDetector(BLAZEPOSE)
+    try:
+        det.detect(frame)  # no box, nothing remembered: the whole photo, then the square around what it found
+        kept = det.adapter.found
+        det.adapter.begin(1)
+        assert det.adapter.regions.last == (kept,)
+        empty = _frame(np.zeros_like(frame.color), index=1)
+        assert not det.detect(empty, box).keypoints.any()
+        det.adapter.begin(2)
+        assert det.adapter.regions.last == ()
+        assert det.adapter.regions.region_for(box, square_around(box).side) is None
+    finally:
+        det.close()
+
+
 @pytest.fixture(scope="module")
 def far_side_render(tmp_path_factory):
     """One synth frame of the MakeHuman body walking (CMU 131_01), seen from its side at 4 m from

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from swarmpose.detect.onnx_pose import Square, crop_square, square_around
-from swarmpose.detect.regions import MIN_RADIUS_PX, ROI_SCALE, RegionMemory, TurnedSquare, aligned_square
+from swarmpose.detect.regions import MAX_REGIONS, MIN_RADIUS_PX, ROI_SCALE, RegionMemory, TurnedSquare, aligned_square
 
 
 def _upright(square: Square) -> TurnedSquare:
@@ -109,3 +109,22 @@ def test_a_discarded_or_cleared_region_serves_no_frame():
     assert memory.last == (kept,)
     memory.clear()
     assert memory.last == () and memory.region_for(None, 200.0) is None
+
+
+def test_a_recording_that_starts_over_crops_no_region_of_its_end():
+    """A smaller frame index (a loop back to frame 0, a camera reopened) forgets the last frame's
+    regions; a dropped region serves no frame; a frame given again keeps at most MAX_REGIONS."""
+    memory, box = RegionMemory(), np.array([40.0, 20.0, 160.0, 180.0])
+    memory.begin(41)
+    memory.add(_region(100, 100))
+    memory.begin(0)
+    assert memory.last == () and memory.region_for(box, 200.0) is None
+    memory.add(_region(100, 100))
+    memory.begin(1)
+    memory.drop(memory.region_for(box, 200.0))
+    memory.drop(None)
+    assert memory.last == ()
+    for k in range(MAX_REGIONS + 5):
+        memory.add(_region(100 + k, 100))
+    memory.begin(2)
+    assert len(memory.last) == MAX_REGIONS and memory.last[0] == _region(100 + MAX_REGIONS + 4, 100)

@@ -26,8 +26,8 @@ black padding, resized to the network's input:
   axis, :mod:`swarmpose.detect.regions`), as MediaPipe's tracking mode crops; with a ``box``, of
   the last frame's regions centred in the box and of about its size the one nearest its centre,
   else the square around the box enlarged by ``margin`` (default 1.25); without a box, the last
-  frame's newest region; without either (first frame, or after the pose flag said nobody was in
-  the last region), the whole frame padded to a square.
+  frame's newest region; without either (first frame, a recording started over, or after the pose
+  flag said nobody was in the last region), the whole frame padded to a square.
 
 Where a network would see the whole frame (no box, nothing to follow), it runs twice when
 ``refine`` is on (the default): once on the whole frame, then on the square around the
@@ -237,9 +237,8 @@ class _BlazePose(_Adapter):
         else:
             xy = region.to_frame(lm[:, :2], self.size)
         self.found = None
-        if float(np.ravel(flag)[0]) < self.min_pose_flag:
-            if box is None:  # nobody where the last frame's person was: the whole frame next
-                self.regions.clear()
+        if float(np.ravel(flag)[0]) < self.min_pose_flag:  # nobody there: not that region again
+            self.regions.drop(region)
             return np.zeros((33, 3))
         self.found = aligned_square(xy[ALIGNMENT_ROWS[0]], xy[ALIGNMENT_ROWS[1]])
         if self.found is not None:
@@ -330,8 +329,6 @@ class OnnxPoseDetector:
                     self.adapter.discard(first)
                 else:
                     self.adapter.discard(self.adapter.found)
-                if not keypoints[:, 2].any():  # nobody after both passes: nothing to follow
-                    self.adapter.forget()
         except DetectorError:
             raise
         except Exception as exc:
@@ -339,7 +336,8 @@ class OnnxPoseDetector:
         return Joints2D(self.layout, keypoints, int(frame.index), int(frame.timestamp_ns))
 
     def reset(self) -> None:
-        """Forget the previous detections (BlazePose then crops the whole frame next time)."""
+        """Forget the previous detections (BlazePose then crops the box's square, without a box the whole
+        frame, next time)."""
         self.adapter.forget()
 
     def close(self) -> None:

@@ -21,6 +21,8 @@ ROI_SCALE = 1.25
 """The crop's side over the alignment circle's diameter (MediaPipe's pose ROI scale)."""
 MIN_RADIUS_PX = 8.0
 """Alignment points closer than this give no region."""
+MAX_REGIONS = 32
+"""A frame keeps at most this many regions (its people; a frame index given again adds to the same frame)."""
 SIDE_RATIO = (0.5, 3.0)
 """A region serves a box whose square's side is within this ratio of its own (a body bent over or
 seated keeps its circle while its joints' box shrinks)."""
@@ -71,20 +73,23 @@ def aligned_square(centre: np.ndarray, rim: np.ndarray, scale: float = ROI_SCALE
 
 class RegionMemory:
     """The regions a network's detections gave, for the next frame's crops: a frame is cropped from the
-    regions of the frame detected before it (one per person found there), never from its own, so the
-    people of one frame and a second pass on it do not crop each other's. ``begin(stamp)`` starts a
-    frame (a new ``stamp``: the one before becomes the last); ``add`` keeps a region of this frame."""
+    regions of the frame detected before it (one per detection with a person there), never from its own,
+    so the people of one frame and a second pass on it do not crop each other's. ``begin(stamp)``
+    starts a frame (a new ``stamp``: the one before becomes the last; a smaller one, a recording that
+    started over, forgets them); ``add`` keeps a region of this frame (at most :data:`MAX_REGIONS`)."""
 
     def __init__(self, side_ratio: tuple[float, float] = SIDE_RATIO):
         self.side_ratio = side_ratio
-        self._stamp: object = None
+        self._stamp: int | None = None
         self._last: list[TurnedSquare] = []
         self._now: list[TurnedSquare] = []
 
-    def begin(self, stamp: object) -> None:
-        """Start detecting the frame ``stamp`` (the same stamp again: the same frame)."""
-        if stamp != self._stamp:
-            self._stamp, self._last, self._now = stamp, self._now, []
+    def begin(self, stamp: int) -> None:
+        """Start detecting frame ``stamp`` (the same stamp again: the same frame)."""
+        if stamp == self._stamp:
+            return
+        went_back = self._stamp is not None and stamp < self._stamp
+        self._stamp, self._last, self._now = stamp, [] if went_back else self._now, []
 
     @property
     def last(self) -> tuple[TurnedSquare, ...]:
@@ -106,11 +111,17 @@ class RegionMemory:
     def add(self, region: TurnedSquare) -> None:
         """Keep ``region``, found on this frame, for the next."""
         self._now.insert(0, region)
+        del self._now[MAX_REGIONS:]
 
     def discard(self, region: TurnedSquare | None) -> None:
         """Drop ``region``, found on this frame (a pass whose keypoints were not kept); None: nothing."""
         if region is not None and region in self._now:
             self._now.remove(region)
+
+    def drop(self, region: TurnedSquare | None) -> None:
+        """Drop ``region`` of the last frame (its crop found nobody); None: nothing."""
+        if region is not None and region in self._last:
+            self._last.remove(region)
 
     def clear(self) -> None:
         """Forget every region."""

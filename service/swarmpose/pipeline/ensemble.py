@@ -17,8 +17,8 @@ people by the least total mean joint distance (scipy's ``linear_sum_assignment``
 apart than :data:`MATCH_M`, or turned the other way, is no pair and takes no one's place in the
 assignment); a person only the others found is left out, and a person the others did not find is
 published as the first track has it. The members
-share the detector (each calls it on its own crops; a BlazePose detector's memory of the last
-whole-frame detection, used where a track has no box, is shared too) and only the first one keeps
+share the detector (each calls it on its own crops; a BlazePose detector's regions of the last
+frame, :mod:`swarmpose.detect.regions`, are shared too, so a member may crop another's) and only the first one keeps
 the world frame (``--floor``). Each track searches on from its own
 solution: the average is published, never fed back. Each frame costs ``N`` times the detection
 and tracking; nothing is published late, so :class:`~swarmpose.pipeline.api.Tracker` may use it
