@@ -416,3 +416,33 @@ def test_the_live_tracker_waits_for_a_newer_frame_about_to_be_detected(wave_sequ
     timing.detecting(time.monotonic(), False, newer.received_ns)  # due in 20 ms: more than half of 33 ms
     worker._detected.put(newer)
     assert worker._fresher(held) is held and worker._detected.get(timeout=0.0) is newer  # not even looked at
+
+
+class CallRecorder:
+    """The real detector, noting its calls in order: ("detect", frame index) and "reset"."""
+
+    def __init__(self, inner):
+        self.inner, self.calls = inner, []
+
+    def detect(self, frame, box=None):
+        self.calls.append(("detect", frame.index))
+        return self.inner.detect(frame, box)
+
+    def reset(self):
+        self.calls.append("reset")
+
+    def close(self):
+        self.inner.close()
+
+
+def test_a_looped_recording_resets_its_detector_before_the_first_frame_of_each_new_pass(wave_sequence, body):
+    """The detection thread, which runs ahead of the tracker, resets the detector itself when a new take
+    begins, once and before detecting its first frame (so a frame of the new take is never cropped from
+    the old take's regions, and regions found on the new take are not thrown away by a late reset)."""
+    source = open_source(f"folder:{wave_sequence}")
+    detector = CallRecorder(make_detector("simulated", source))
+    frames = len(load_ground_truth(wave_sequence).joints3d)
+    make_worker(wave_sequence, body, [Collect()], source=source, detector=detector, loop=True,
+                frames=2 * frames).run()
+    first_pass = [("detect", k) for k in range(frames)]
+    assert detector.calls == first_pass + ["reset"] + first_pass

@@ -132,9 +132,7 @@ def write_overlays(out: Path, *, detector: str = "movenet", assets: str | Path |
             ankle_height = ankle_rest_height(tracker.body)
             images, states, bodies = [], [], []
             for frame in frames:
-                tracker.reset()
-                if hasattr(tracker.detector, "reset"):  # BlazePose would crop around the last frame
-                    tracker.detector.reset()
+                tracker.reset()  # the detector too: BlazePose would crop the last picture's regions
                 result = tracker.track_frame(frame)
                 images.append(draw(frame, result))
                 states.append(", ".join(f"{b.id}: {b.state}" for b in result.bodies) if result.bodies

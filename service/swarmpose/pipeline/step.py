@@ -210,9 +210,9 @@ class FramePipeline:
         """:meth:`detect` without the floor of the world frame."""
         t0 = time.perf_counter()
         with self._box_lock:
-            stale, self._detector_stale = self._detector_stale, False
-        if stale and hasattr(self.detector, "reset"):  # in the detection's thread, as every detector call
-            self.detector.reset()
+            stale = self._detector_stale
+        if stale:
+            self.reset_detector()
         segmentation, segment_ms, props = None, 0.0, None
         unsegmented = self.max_people > 1 and self._unsegmented()
         if self.max_people > 1 and not unsegmented:
@@ -375,10 +375,11 @@ class FramePipeline:
             return self.in_world(skipped_result(item, received_ns))
         return self.track(item, self.detect(item), received_ns)
 
-    def reset(self) -> None:
-        """Forget the tracks, the bodies fitted to their people, the detector's box, what the detector
-        remembers of earlier frames (its next detection resets it first) and the props seen (a camera
-        that came back may stand elsewhere)."""
+    def reset(self, detector: bool = True) -> None:
+        """Forget the tracks, the bodies fitted to their people, the detector's box, the props seen (a
+        camera that came back may stand elsewhere) and, with ``detector``, what the detector remembers
+        of earlier frames (its next detection resets it first; False: the caller resets it in the
+        detection's own thread, :meth:`reset_detector`, as the live worker does)."""
         if self.tracker is not None:
             self.tracker.new_person()
         if self.people is not None:
@@ -388,7 +389,15 @@ class FramePipeline:
         with self._box_lock:
             self._box, self._boxes, self._alone = None, [], 0
             self._steady.reset()
-            self._detector_stale = True
+            self._detector_stale = self._detector_stale or detector
+
+    def reset_detector(self) -> None:
+        """Make the detector forget what it remembers of earlier frames (BlazePose's regions), now: call it
+        in the detection's thread, where every detector call runs."""
+        with self._box_lock:
+            self._detector_stale = False
+        if hasattr(self.detector, "reset"):
+            self.detector.reset()
 
 
 def skipped_result(item: SkippedFrame, received_ns: int = 0) -> FrameResult:

@@ -98,7 +98,7 @@ class Worker:
         self._live_sinks = list(self.sinks)
         self._deferred_skips = 0
         self._timing = JustInTime()
-        self._opening = self._tracked_opening = 0
+        self._opening = self._tracked_opening = self._detected_opening = 0
         self._stop = threading.Event()
         self._done = threading.Event()
         self._lock = threading.Lock()
@@ -279,6 +279,9 @@ class Worker:
                         self._deferred_skips += 1
                         warn_skipped(self.source_uri, got.item, self._deferred_skips)
                 took = None
+                if got.opening != self._detected_opening:  # a new take: the detector starts afresh, before
+                    self._detected_opening = got.opening    # its first frame (the tracker resets the rest)
+                    self.pipeline.reset_detector()
                 if isinstance(got.item, Frame):
                     self._timing.detecting(started, segmenting, got.received_ns)
                     got.detection = self.pipeline.detect(got.item)
@@ -307,7 +310,7 @@ class Worker:
                 else:  # replay: leave out the wait for the previous frame's tracking
                     got.received_ns += time.time_ns() - got.detected_ns
                 if got.opening != self._tracked_opening:  # the recording started over (or the camera came back):
-                    self.pipeline.reset()                    # its people are new, where the old ones were is no help
+                    self.pipeline.reset(detector=False)      # its people are new, where the old ones were is no help
                     self._tracked_opening = got.opening
                 self._timing.tracking()
                 self._publish(got)
