@@ -18,20 +18,21 @@ def test_a_record_is_read_back_only_with_its_own_settings(tmp_path):
 
 
 def test_a_record_made_before_a_setting_existed_reads_as_what_the_tracker_did_then(tmp_path):
-    """Records written before arm_prior, limb_flips, hidden_lifts, arm_proposals, hypotheses, polish
-    and box_hold existed lack them: they were made with the prior off (0, still its default), without
-    flips, with every lift in the 3D term, without arm proposals, sub-swarms or polish and with the
-    detector's box following the joints every frame (on by default now), so they resume a run with
-    those off, and neither the default run nor one with the prior on."""
+    """Records written before arm_prior, limb_flips, hidden_lifts, arm_proposals, hypotheses, polish,
+    box_hold and search existed lack them: they were made with the prior off (0, still its default),
+    without flips, with every lift in the 3D term, without arm proposals, sub-swarms or polish, with
+    the detector's box following the joints every frame and with the whole-pose swarm, so they resume
+    a run with those off, and neither the default run nor one with the prior on."""
     path = tmp_path / "old.json"
     write_record(path, {"mpjpe_mm": 50.0, "particles": 64, "generations": 64, "max_people": 1})
     then = {"limb_flips": False, "hidden_lifts": False, "arm_proposals": False, "hypotheses": 0, "polish": 0,
-            "box_hold": 0.0}
+            "box_hold": 0.0, "search": "swarm", "generations": 64}  # 64 generations: the default then
     assert read_record(path, tracker_settings(then))["mpjpe_mm"] == 50.0
     assert read_record(path, tracker_settings(None)) is None, "the default run has flips"
     assert read_record(path, tracker_settings({"limb_flips": False})) is None, "and drops hidden lifts"
     assert read_record(path, tracker_settings({"arm_prior": 1.0, **then})) is None
     assert read_record(path, tracker_settings({"particles": 32, **then})) is None
+    assert read_record(path, tracker_settings({**then, "search": "blocks"})) is None
 
 
 def test_a_record_made_without_flips_does_not_resume_a_default_run(tmp_path):

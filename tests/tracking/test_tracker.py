@@ -263,6 +263,32 @@ def test_a_short_live_frame_seeds_the_limbs_at_their_lifts_and_an_offline_one_do
         assert [("lifted" in r.timings_ms) for r in results[1:]] == [seeded] * (FRAMES - 1)
 
 
+def searched_by_blocks(tracker: BodyTracker) -> list[bool]:
+    """The ``blocks`` argument of each of ``tracker``'s searches, recorded as they run."""
+    seen, real = [], tracker.pso_search
+
+    def search(objective, start, rng, pso, groups=None, blocks=False, proposals=()):
+        seen.append(blocks)
+        return real(objective, start, rng, pso, groups, blocks, proposals)
+
+    tracker.pso_search = search
+    return seen
+
+
+def test_a_tracked_frame_searches_block_by_block_unless_the_whole_swarm_is_asked_for(body, sequence):
+    """``search`` blocks (the default): every tracked frame's swarm runs block by block
+    (:mod:`swarmpose.tracking.block_pso`), the start's searches with the whole-pose swarm; ``search``
+    swarm: every search with the whole-pose swarm. Both follow the walker (31-32 mm measured)."""
+    intr = Intrinsics.load(sequence / "intrinsic.json")
+    for search, tracked_by_blocks in (("blocks", FRAMES - 1), ("swarm", 0)):
+        tracker = BodyTracker(body, intr, TrackerConfig(particles=24, generations=8, search=search))
+        seen = searched_by_blocks(tracker)
+        results = [tracker.step(frame, det) for frame, det in frames_of(sequence)]
+        assert all(r.state != "lost" for r in results)
+        assert seen.count(True) == tracked_by_blocks and len(seen) > FRAMES - 1
+        assert errors_mm(results, sequence).mean() < 50.0
+
+
 def started_with_sizes(body, intr, frame, det, budget_ms: float, monkeypatch):
     """A track started on ``frame`` (40 generations, 20 polish rounds configured) with a frame budget of
     ``budget_ms``: (its result, the generations of its last search, the polish rounds it ran)."""

@@ -10,16 +10,20 @@ Per frame (:meth:`BodyTracker.step`):
    the J^e torso pose are injected as particles, and so are the previous solution's limbs
    mirrored along the line of sight (:mod:`swarmpose.tracking.limb_flips`, ``limb_flips``),
    and its arms sent to depth within reach that its body does not explain and to each other's
-   mirror image (:mod:`swarmpose.tracking.arm_proposals`, ``arm_proposals``), the best
-   ``hypotheses`` of these flips and proposals each with a sub-swarm that refines it apart from
-   the track for most of the generations (:mod:`swarmpose.tracking.hypotheses`); every
+   mirror image (:mod:`swarmpose.tracking.arm_proposals`, ``arm_proposals``); with ``search``
+   swarm the best ``hypotheses`` of these flips and proposals each with a sub-swarm that refines
+   it apart from the track for most of the generations (:mod:`swarmpose.tracking.hypotheses`); every
    ``recheck`` frames the start's facings, refitted from the detection, compete as particles
    too. Without one (the first frame, or after the track was lost: state *init*), the torso
    pose of J^e (:func:`swarmpose.tracking.init_pose.torso_pose`) with the body's rest angles,
    turned to each of four facings (side and back views make its facing unreliable), starts one
    PSO over wide angle ranges each; the best fit by the objective is the centre of the normal
    search, the others join it as particles. No manual initialisation.
-3. **Search**. PSO (canonical or perturbed) of ``E = w_D·E_D + w_J·E_J``; with ``polish``, a local
+3. **Search**. A tracked frame's swarm minimises ``E = w_D·E_D + w_J·E_J`` block by block, each
+   particle moving the root, the trunk or one limb of a pose the swarm shares, each flip and
+   proposal starting a particle of its limb's sub-swarm (``search`` blocks,
+   :mod:`swarmpose.tracking.block_pso`); ``search`` swarm: the paper's PSO (canonical or perturbed)
+   of the whole pose, with the hypotheses' sub-swarms. A start searches with the latter. With ``polish``, a local
    search takes the chosen pose (young track: each facing's best) further down E, arms as searched (.pose_polish).
 4. **Verdict** (:mod:`swarmpose.tracking.verdict`): lost or not, and per-joint confidence.
    Frames with no usable joints and no previous solution, or with neither joints nor
@@ -32,6 +36,7 @@ Modes: ``hybrid`` (w_D = 3, w_J = 1), ``depth`` (w_J = 0; the joints only (re)in
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -49,6 +54,7 @@ from swarmpose.gpu.tile import box_around
 from swarmpose.sources.base import Frame
 from swarmpose.tracking import search, verdict
 from swarmpose.tracking.arm_proposals import arm_proposals
+from swarmpose.tracking.block_pso import BLOCKS, changed_block, minimise_blocks
 from swarmpose.tracking.body_scene import body_scene
 from swarmpose.tracking.budget import POLISH_CANDIDATES, FrameBudget, lean_frame
 from swarmpose.tracking.config import TrackerConfig
@@ -237,13 +243,14 @@ class BodyTracker:
             start[i] = s
         t1 = time.perf_counter()
         self.objective.set_frame(depth, box, targets, centre)
+        blocks = state == "tracking" and self.config.search == "blocks"
         groups = None
-        if state == "tracking":  # the ranking's time is its own, not the search's
+        if state == "tracking" and not blocks:  # the ranking's time is its own, not the search's
             with timed(timings, "hypotheses"):
                 groups = hypothesis_groups(self.objective, proposals, start, self.config.hypotheses, radius, rng,
                                            keep=len(seeds))
         self.objective.take_spent()
-        result = self.pso_search(self.objective, start, rng, pso, groups)
+        result = self.pso_search(self.objective, start, rng, pso, groups, blocks, proposals)
         timings["pso"] = 1000 * (time.perf_counter() - t1) - timings.get("hypotheses", 0.0)
         timings.update(search_split(self.objective.take_spent(), timings["pso"]))
         duel = self.age < max(YOUNG_RECHECKS) and self.previous is not None  # a young track: both facings polished
@@ -358,10 +365,18 @@ class BodyTracker:
         return lost_body(reason, self.body_id, {"total": 1000 * (time.perf_counter() - t0)}, joints)
 
     def pso_search(self, objective: Objective, start: np.ndarray, rng: np.random.Generator, pso: PsoConfig,
-                   groups: np.ndarray | None = None) -> PsoResult:
+                   groups: np.ndarray | None = None, blocks: bool = False,
+                   proposals: Sequence[np.ndarray] = ()) -> PsoResult:
         """One PSO of ``objective`` from ``start`` (P, 36): coarse to fine when the objective
         renders and has a coarse level (the first ``config.coarse_share`` of the generations on
-        it), else at full resolution throughout; ``groups``: sub-swarms (:mod:`swarmpose.tracking.hypotheses`)."""
+        it), else at full resolution throughout; ``groups``: sub-swarms (:mod:`swarmpose.tracking.hypotheses`).
+        blocks: block by block (:mod:`swarmpose.tracking.block_pso`), at full resolution, without
+        sub-swarms, each of ``proposals`` (whole poses, the previous pose with one limb changed)
+        starting a particle of its limb's sub-swarm."""
+        if blocks and len(start) > len(BLOCKS):
+            changed = [(changed_block(p, self.previous), p) for p in proposals]
+            return minimise_blocks(objective, start, self.lo, self.hi, rng, pso, search.renormalise,
+                                   proposals=[(b, p) for b, p in changed if b is not None])
         coarse = objective.uses_depth and objective.coarse is not None
         refine_at = self.config.refine_at(pso.generations) if coarse else 0
         objective.coarse_active = refine_at > 0
