@@ -65,7 +65,8 @@ def test_the_report_of_a_tiny_run_matches_its_sequence_tracked_on_its_own(tmp_pa
     still = joints[3:15]
     by_hand = 1000.0 * np.sqrt(((still - still.mean(axis=0)) ** 2).sum(axis=2).mean(axis=0))
     assert np.allclose(rows["off"]["jitter_per_joint_mm"], by_hand, atol=0.05)
-    assert rows["off"]["jitter_worst"] == EVAL_JOINTS[int(np.argmax(by_hand))]
+    worst = EVAL_JOINTS.index(rows["off"]["jitter_worst"])  # a joint as unsteady as the worst (ties: the CSV's mm)
+    assert by_hand[worst] == pytest.approx(by_hand.max(), abs=0.05)
     truth = [json.loads(line) for line in (sequence / "groundtruth.jsonl").read_text().splitlines()]
     true = np.array([[t["joints3d"][j] for j in EVAL_JOINTS] for t in truth])
     assert np.array_equal(true[:15], np.repeat(true[:1], 15, axis=0))  # still for 0.5 s, then the walk

@@ -146,3 +146,26 @@ def test_a_proposal_starts_a_particle_of_its_block_and_is_scored_in_the_context(
     without = minimise_blocks(separable, start, lo, hi, np.random.default_rng(6), config)
     off = np.abs(without.best[BLOCKS[2]] - TARGET[BLOCKS[2]]).max()
     assert np.abs(with_it.best[BLOCKS[2]] - TARGET[BLOCKS[2]]).max() < 0.1 < off
+
+
+def test_the_frame_search_runs_the_whole_swarm_first_then_the_blocks_at_the_same_cost():
+    from swarmpose.tracking.block_pso import WHOLE_SHARE, whole_then_blocks
+
+    calls = []
+
+    def f(x):
+        calls.append(x.copy())
+        return separable(x)
+
+    lo, hi = box()
+    start = np.random.default_rng(8).uniform(-0.6, 0.6, (32, 36))
+    config = PsoConfig(particles=32, generations=12)
+    result = whole_then_blocks(f, start, lo, hi, np.random.default_rng(9), config, proposals=[(2, TARGET)])
+    first = round(WHOLE_SHARE * 12)
+    assert len(calls) == 13 and result.evaluations == 32 * 13 and len(result.history) == 13
+    member = block_of_particles(32, len(BLOCKS))
+    for k, rows in enumerate(calls[1:], start=1):
+        one_block = all(np.isin(np.flatnonzero(rows[i] != rows[0]), BLOCKS[member[i]]).all() for i in range(1, 32))
+        assert one_block == (k > first), k  # the whole swarm moves every column, the blocks one block each
+    assert np.all(np.diff(result.history) <= 0)
+    assert result.value == pytest.approx(min(separable(c).min() for c in calls))

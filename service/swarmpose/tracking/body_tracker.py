@@ -23,7 +23,9 @@ Per frame (:meth:`BodyTracker.step`):
    particle moving the root, the trunk or one limb of a pose the swarm shares, each flip and
    proposal starting a particle of its limb's sub-swarm (``search`` blocks,
    :mod:`swarmpose.tracking.block_pso`); ``search`` swarm: the paper's PSO (canonical or perturbed)
-   of the whole pose, with the hypotheses' sub-swarms. A start searches with the latter. With ``polish``, a local
+   of the whole pose, with the hypotheses' sub-swarms. A start, and a frame whose seeds hold another
+   facing (re-checked facings, a challenger), search with the latter: a turned pose must be refined
+   whole to compete with the track, which blocks of it cannot do. With ``polish``, a local
    search takes the chosen pose (young track: each facing's best) further down E, arms as searched (.pose_polish).
 4. **Verdict** (:mod:`swarmpose.tracking.verdict`): lost or not, and per-joint confidence.
    Frames with no usable joints and no previous solution, or with neither joints nor
@@ -54,7 +56,7 @@ from swarmpose.gpu.tile import box_around
 from swarmpose.sources.base import Frame
 from swarmpose.tracking import search, verdict
 from swarmpose.tracking.arm_proposals import arm_proposals
-from swarmpose.tracking.block_pso import BLOCKS, changed_block, minimise_blocks
+from swarmpose.tracking.block_pso import BLOCKS, changed_block, whole_then_blocks
 from swarmpose.tracking.body_scene import body_scene
 from swarmpose.tracking.budget import POLISH_CANDIDATES, FrameBudget, lean_frame
 from swarmpose.tracking.config import TrackerConfig
@@ -230,6 +232,7 @@ class BodyTracker:
                                        start=state == "init")
         timings: dict[str, float] = {}
         proposals: list[np.ndarray] = []  # limb flips and arm proposals (tracking only)
+        contested = False  # another facing (a re-check's, a challenger) competes with the track
         if state == "init":
             seeds = fit_facings(self, centre, targets, depth, rng, timings)
             centre = seeds[0]
@@ -237,13 +240,13 @@ class BodyTracker:
             start = search.spread(centre, pso.particles, rng, np.full(3, 0.04), 0.1, 0.15)
         else:  # the track's last pose, its motion, the re-checked facings and the proposals
             centre = self.previous
-            targets, start, seeds, proposals, box, radius = self._tracking_start(frame, lifted, targets, depth, rng,
-                                                                                 timings, pso)
+            targets, start, seeds, proposals, box, radius, contested = self._tracking_start(
+                frame, lifted, targets, depth, rng, timings, pso)
         for i, s in enumerate((seeds + proposals)[:pso.particles]):
             start[i] = s
         t1 = time.perf_counter()
         self.objective.set_frame(depth, box, targets, centre)
-        blocks = state == "tracking" and self.config.search == "blocks"
+        blocks = state == "tracking" and self.config.search == "blocks" and not contested
         groups = None
         if state == "tracking" and not blocks:  # the ranking's time is its own, not the search's
             with timed(timings, "hypotheses"):
@@ -294,7 +297,8 @@ class BodyTracker:
     def _tracking_start(self, frame: Frame, lifted: dict[str, np.ndarray], targets: JointTargets, depth: np.ndarray,
                         rng: np.random.Generator, timings: dict[str, float], pso: PsoConfig) -> tuple:
         """A tracked frame's swarm start around the last pose: (targets less the lifts the body hides,
-        start (P, 36), seeds, proposals, box, angle radius). Seeds: the last pose, where its motion
+        start (P, 36), seeds, proposals, box, angle radius, whether another facing competes: the
+        re-checked facings or a challenger are among the seeds). Seeds: the last pose, where its motion
         leads, the challenger, the history, the J^e torso and the re-checked facings; proposals: arms
         sent to unexplained depth and limbs mirrored in depth, as many as the swarm has room for."""
         centre = self.previous
@@ -328,7 +332,7 @@ class BodyTracker:
         if self.config.limb_flips and room > 0 and not lean:
             with timed(timings, "flips"):
                 proposals += limb_flips(self.body, centre, most=room)
-        return targets, start, seeds, proposals, box, radius
+        return targets, start, seeds, proposals, box, radius, bool(recheck) or self.challenger is not None
 
     def _hold_facing(self, result: PsoResult) -> np.ndarray:
         """The frame's solution from the search's ``result``: its best, unless that is turned
@@ -375,8 +379,8 @@ class BodyTracker:
         starting a particle of its limb's sub-swarm."""
         if blocks and len(start) > len(BLOCKS):
             changed = [(changed_block(p, self.previous), p) for p in proposals]
-            return minimise_blocks(objective, start, self.lo, self.hi, rng, pso, search.renormalise,
-                                   proposals=[(b, p) for b, p in changed if b is not None])
+            return whole_then_blocks(objective, start, self.lo, self.hi, rng, pso, search.renormalise, search.perturb,
+                                     [(b, p) for b, p in changed if b is not None])
         coarse = objective.uses_depth and objective.coarse is not None
         refine_at = self.config.refine_at(pso.generations) if coarse else 0
         objective.coarse_active = refine_at > 0
