@@ -26,13 +26,13 @@ def test_a_record_made_before_a_setting_existed_reads_as_what_the_tracker_did_th
     path = tmp_path / "old.json"
     write_record(path, {"mpjpe_mm": 50.0, "particles": 64, "generations": 64, "max_people": 1})
     then = {"limb_flips": False, "hidden_lifts": False, "arm_proposals": False, "hypotheses": 0, "polish": 0,
-            "box_hold": 0.0, "search": "swarm", "generations": 64}  # 64 generations: the default then
+            "box_hold": 0.0, "search": "swarm"}
     assert read_record(path, tracker_settings(then))["mpjpe_mm"] == 50.0
     assert read_record(path, tracker_settings(None)) is None, "the default run has flips"
     assert read_record(path, tracker_settings({"limb_flips": False})) is None, "and drops hidden lifts"
     assert read_record(path, tracker_settings({"arm_prior": 1.0, **then})) is None
     assert read_record(path, tracker_settings({"particles": 32, **then})) is None
-    assert read_record(path, tracker_settings({**then, "search": "blocks"})) is None
+    assert read_record(path, tracker_settings({**then, "search": "auto"})) is None
 
 
 def test_a_record_made_without_flips_does_not_resume_a_default_run(tmp_path):

@@ -275,19 +275,22 @@ def searched_by_blocks(tracker: BodyTracker) -> list[bool]:
     return seen
 
 
-def test_a_tracked_frame_searches_block_by_block_unless_the_whole_swarm_is_asked_for(body, sequence):
-    """``search`` blocks (the default): a tracked frame's swarm runs block by block after its first
-    generations (:mod:`swarmpose.tracking.block_pso`), except where re-checked facings compete (a young
-    track's frames 1, 2 and 4) and at the start, which search with the whole-pose swarm; ``search``
-    swarm: every search with the whole-pose swarm. Both follow the walker (31-32 mm measured)."""
+def test_a_live_tracked_frame_searches_block_by_block_and_an_offline_one_with_the_whole_swarm(body, sequence):
+    """``search`` auto (the default): with a frame budget a tracked frame's swarm runs block by block
+    after its first generations (:mod:`swarmpose.tracking.block_pso`), except where re-checked facings
+    compete (a young track's frames 1, 2 and 4) and at the start; offline every search is the
+    whole-pose swarm's, as with ``search`` swarm; ``search`` blocks searches block by block offline
+    too. Each follows the walker (31-32 mm measured)."""
     intr = Intrinsics.load(sequence / "intrinsic.json")
-    for search in ("blocks", "swarm"):
+    for search, budget_ms, by_blocks in (("auto", 60.0, True), ("auto", 0.0, False), ("blocks", 0.0, True),
+                                         ("swarm", 60.0, False)):
         tracker = BodyTracker(body, intr, TrackerConfig(particles=24, generations=8, search=search))
+        tracker.budget_ms, tracker.frame_period_s = budget_ms, 1 / 15
         seen = searched_by_blocks(tracker)
         results = [tracker.step(frame, det) for frame, det in frames_of(sequence)]
         assert all(r.state != "lost" for r in results)
         quiet = [r for r in results[1:] if "recheck" not in r.timings_ms]  # tracked, no facing re-checked
-        assert quiet and seen.count(True) == (len(quiet) if search == "blocks" else 0)
+        assert quiet and seen.count(True) == (len(quiet) if by_blocks else 0), (search, budget_ms)
         assert errors_mm(results, sequence).mean() < 50.0
 
 
@@ -365,8 +368,8 @@ def test_a_different_turned_solution_becomes_the_challenger_and_reset_forgets_it
 
 @pytest.mark.slow
 def test_the_best_hypotheses_search_in_sub_swarms_of_their_own(body, sequence, monkeypatch):
-    """With the whole-pose swarm and ``hypotheses = 2`` a tracked frame's search gets the groups: the
-    track's swarm first, then sub-swarms of round(3/16 P) particles at the end, each started on a pose that differs
+    """With the whole-pose swarm (offline) and ``hypotheses = 2`` a tracked frame's search gets the
+    groups: the track's swarm first, then sub-swarms of round(3/16 P) particles at the end, each started on a pose that differs
     from the previous solution (the swarm's first particle) in one limb alone (a flip or an arm
     proposal); with 0, no frame's search has groups."""
     import swarmpose.tracking.body_tracker as module
@@ -379,10 +382,10 @@ def test_the_best_hypotheses_search_in_sub_swarms_of_their_own(body, sequence, m
         return real(objective, start, *args, groups=groups, **kwargs)
 
     monkeypatch.setattr(module, "minimise", recording)
-    track(body, sequence, hypotheses=0, search="swarm")
+    track(body, sequence, hypotheses=0)
     assert calls and all(groups is None for _, groups in calls)
     calls.clear()
-    track(body, sequence, hypotheses=2, search="swarm")
+    track(body, sequence, hypotheses=2)
     grouped = [(start, groups) for start, groups in calls if groups is not None]
     assert grouped, "some tracked frame had proposals"
     limbs = [set(cols.tolist()) for cols in LIMB_COLUMNS[:4]]

@@ -19,13 +19,14 @@ Per frame (:meth:`BodyTracker.step`):
    turned to each of four facings (side and back views make its facing unreliable), starts one
    PSO over wide angle ranges each; the best fit by the objective is the centre of the normal
    search, the others join it as particles. No manual initialisation.
-3. **Search**. A tracked frame's swarm minimises ``E = w_D·E_D + w_J·E_J`` block by block, each
+3. **Search**. PSO of ``E = w_D·E_D + w_J·E_J``: offline (``search`` swarm, or auto) the paper's
+   (canonical or perturbed) of the whole pose, with the hypotheses' sub-swarms; live (``search``
+   blocks, or auto with a frame budget) a quarter of the generations so, then block by block, each
    particle moving the root, the trunk or one limb of a pose the swarm shares, each flip and
-   proposal starting a particle of its limb's sub-swarm (``search`` blocks,
-   :mod:`swarmpose.tracking.block_pso`); ``search`` swarm: the paper's PSO (canonical or perturbed)
-   of the whole pose, with the hypotheses' sub-swarms. A start, and a frame whose seeds hold another
-   facing (re-checked facings, a challenger), search with the latter: a turned pose must be refined
-   whole to compete with the track, which blocks of it cannot do. With ``polish``, a local
+   proposal starting a particle of its limb's sub-swarm (:mod:`swarmpose.tracking.block_pso`). A
+   start, and a frame whose seeds hold another facing (re-checked facings, a challenger), search
+   with the whole-pose swarm: a turned pose must be refined whole to compete with the track, which
+   blocks of it cannot do. With ``polish``, a local
    search takes the chosen pose (young track: each facing's best) further down E, arms as searched (.pose_polish).
 4. **Verdict** (:mod:`swarmpose.tracking.verdict`): lost or not, and per-joint confidence.
    Frames with no usable joints and no previous solution, or with neither joints nor
@@ -246,7 +247,7 @@ class BodyTracker:
             start[i] = s
         t1 = time.perf_counter()
         self.objective.set_frame(depth, box, targets, centre)
-        blocks = state == "tracking" and self.config.search == "blocks" and not contested
+        blocks = state == "tracking" and not contested and self.searches_by_blocks()
         groups = None
         if state == "tracking" and not blocks:  # the ranking's time is its own, not the search's
             with timed(timings, "hypotheses"):
@@ -367,6 +368,10 @@ class BodyTracker:
     def _lost(self, reason: str, t0: float, joints: Joints2D | None = None) -> BodyResult:
         self.reset()
         return lost_body(reason, self.body_id, {"total": 1000 * (time.perf_counter() - t0)}, joints)
+
+    def searches_by_blocks(self) -> bool:
+        """Whether a tracked frame searches block by block (``search``: blocks, or auto with a frame budget)."""
+        return self.config.search == "blocks" or (self.config.search == "auto" and self.budget_ms > 0)
 
     def pso_search(self, objective: Objective, start: np.ndarray, rng: np.random.Generator, pso: PsoConfig,
                    groups: np.ndarray | None = None, blocks: bool = False,

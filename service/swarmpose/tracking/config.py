@@ -16,9 +16,10 @@ if TYPE_CHECKING:  # the objective (body model, scipy) is imported where the wei
 MODES = ("hybrid", "depth", "joints", "lift")
 VARIANTS = ("canonical", "perturbed")
 """The PSO variants (:mod:`swarmpose.tracking.pso`)."""
-SEARCHES = ("blocks", "swarm")
-"""A tracked frame's search: block by block (:mod:`swarmpose.tracking.block_pso`) or the paper's
-whole-pose swarm (:mod:`swarmpose.tracking.pso`)."""
+SEARCHES = ("auto", "blocks", "swarm")
+"""A tracked frame's search: block by block (:mod:`swarmpose.tracking.block_pso`), the paper's
+whole-pose swarm (:mod:`swarmpose.tracking.pso`), or (auto) the former on a live frame with a frame
+budget and the latter offline."""
 SMOOTHING = ("off", "one-euro", "centred")
 MODE_WEIGHTS = {"hybrid": (3.0, 1.0), "depth": (1.0, 0.0), "joints": (0.0, 1.0)}
 """(w_D, w_J) of each mode; ``lift`` fits no model."""
@@ -32,12 +33,15 @@ class TrackerConfig:
                                   "model)", choices=MODES)
     """depth mode: the joints still (re)start a track."""
     particles: int = setting(64, "PSO particles per generation", minimum=1)
-    generations: int = setting(32, "PSO generations per frame", minimum=1)
+    generations: int = setting(64, "PSO generations per frame", minimum=1)
     pso: str = setting("perturbed", "PSO variant", choices=VARIANTS)
-    search: str = setting("blocks", "tracked frames: blocks (a particle moves one limb of a shared pose) or swarm "
-                                    "(the paper's PSO)", choices=SEARCHES)
-    """A track's start and the facings' re-checks search with the whole-pose swarm either way. The
-    PSO variant's perturbation and the sub-swarms (``hypotheses``) are the whole-pose swarm's."""
+    search: str = setting("auto", "tracked frames: blocks (a particle moves one limb of a shared pose), swarm ("
+                                  "the paper), auto (blocks live)", choices=SEARCHES)
+    """auto: block by block on a live frame with a frame budget (its short search gains most: live
+    emulation 89 -> 72-74 mm), the whole-pose swarm offline, where the blocks still lose a track now
+    and then (two of the matrix's 45 cells at seed 0, BENCHMARKS.md). A track's start and frames
+    where other facings compete search with the whole-pose swarm either way. The PSO variant's
+    perturbation and the sub-swarms (``hypotheses``) are the whole-pose swarm's."""
     depth_weight: float | None = setting(None, "w_D (auto: the mode's)", kind="float?", minimum=0)
     joints_weight: float | None = setting(None, "w_J (auto: the mode's)", kind="float?", minimum=0)
     tile: tuple[int, int] = setting((64, 64), "depth tile WxH pixels over the person's box", kind="size")
@@ -83,7 +87,7 @@ class TrackerConfig:
     body does not explain, and to the other arm's mirror image; each such pose is a particle."""
     hypotheses: int = setting(2, "search swarm: the best N limb flips and arm proposals each refine in a "
                                  "sub-swarm first (0 = off)", minimum=0, maximum=4)
-    """With ``search`` blocks every flip and proposal starts a particle of its limb's sub-swarm instead.
+    """Searched block by block, every flip and proposal starts a particle of its limb's sub-swarm instead.
     Each sub-swarm has 3/16 of the particles (12 of 64) and refines its proposal apart from the
     track for the first 3/4 of the generations before they compete; 0: single particles."""
     hidden_lifts: bool = setting(True, "a joint hidden behind the body's own depth leaves the 3D joint term")
