@@ -294,6 +294,27 @@ def test_a_live_tracked_frame_searches_block_by_block_and_an_offline_one_with_th
         assert errors_mm(results, sequence).mean() < 50.0
 
 
+def test_an_offline_recheck_refits_the_facings_on_a_quarter_of_the_start_budget(body, sequence):
+    """Offline a re-check's facing fits run a quarter of ``start_budget`` generations when the frame's
+    own search is smaller (24 // 4 = 6, not 8 // 4 = 2): a re-check must be able to replace a track
+    started mirrored whatever the frame's budget."""
+    intr = Intrinsics.load(sequence / "intrinsic.json")
+    tracker = BodyTracker(body, intr, TrackerConfig(particles=24, generations=8, start_budget=24))
+    sizes, real = [], tracker.pso_search
+
+    def search(objective, start, rng, pso, *args, **kwargs):
+        sizes.append(pso.generations)
+        return real(objective, start, rng, pso, *args, **kwargs)
+
+    tracker.pso_search = search
+    frames = list(frames_of(sequence))
+    tracker.step(*frames[0])
+    sizes.clear()
+    result = tracker.step(*frames[1])  # a young track's first re-check
+    assert "recheck" in result.timings_ms
+    assert 6 in sizes and 2 not in sizes and sizes[-1] == 8  # the facings' fits, then the frame's own search
+
+
 def started_with_sizes(body, intr, frame, det, budget_ms: float, monkeypatch):
     """A track started on ``frame`` (40 generations, 20 polish rounds configured) with a frame budget of
     ``budget_ms``: (its result, the generations of its last search, the polish rounds it ran)."""
@@ -369,9 +390,9 @@ def test_a_different_turned_solution_becomes_the_challenger_and_reset_forgets_it
 @pytest.mark.slow
 def test_the_best_hypotheses_search_in_sub_swarms_of_their_own(body, sequence, monkeypatch):
     """With the whole-pose swarm (offline) and ``hypotheses = 2`` a tracked frame's search gets the
-    groups: the track's swarm first, then sub-swarms of round(3/16 P) particles at the end, each started on a pose that differs
-    from the previous solution (the swarm's first particle) in one limb alone (a flip or an arm
-    proposal); with 0, no frame's search has groups."""
+    groups: the track's swarm first, then sub-swarms of round(3/16 P) particles at the end, each
+    started on a pose that differs from the previous solution (the swarm's first particle) in one
+    limb alone (a flip or an arm proposal); with 0, no frame's search has groups."""
     import swarmpose.tracking.body_tracker as module
     from swarmpose.tracking.search import LIMB_COLUMNS
 

@@ -312,7 +312,9 @@ class BodyTracker:
         if hidden:
             with timed(timings, "hidden"):
                 targets = without_hidden_lifts(self.body, centre, targets, self.intrinsics, scene)
-        recheck = recheck_facings(self, frame.index, lifted, targets, depth, rng, timings, pso.generations)
+        offline = max(pso.generations, self.config.start_budget)  # a re-check refits the start's facings
+        recheck = recheck_facings(self, frame.index, lifted, targets, depth, rng, timings,
+                                  pso.generations if self.budget_ms > 0 else offline)
         torso = torso_pose(self.body, lifted, centre[7:], upright=False)
         offset = np.abs(torso[:3] - centre[:3]) if torso is not None else np.zeros(3)
         radius = search.angle_radius(self.body, self.intrinsics, centre, targets)

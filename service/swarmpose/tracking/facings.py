@@ -98,8 +98,8 @@ def recheck_facings(tracker: BodyTracker, index: int, lifted: dict[str, np.ndarr
                     depth: np.ndarray, rng: np.random.Generator, timings: dict[str, float],
                     generations: int) -> list[np.ndarray]:
     """Every ``config.recheck`` frames and on a young track's :data:`YOUNG_RECHECKS` frames,
-    the start's facings refitted from the detection on a quarter of the frame's ``generations``
-    (live: the joint stage alone, :func:`fit_facings`):
+    the start's facings refitted from the detection on a quarter of ``generations`` (the tracker
+    passes the frame's live, at least the start's offline; live the joint stage alone, :func:`fit_facings`):
     they join the swarm as particles, so a track locked in a wrong facing or limb configuration is
     replaced as soon as they explain the frame better."""
     if not recheck_due(index, tracker.age + 1, tracker.config.recheck) or targets.count == 0:  # this frame's age
