@@ -10,9 +10,9 @@ Per frame (:meth:`BodyTracker.step`):
    the J^e torso pose are injected as particles, and so are the previous solution's limbs
    mirrored along the line of sight (:mod:`swarmpose.tracking.limb_flips`, ``limb_flips``),
    and its arms sent to depth within reach that its body does not explain and to each other's
-   mirror image (:mod:`swarmpose.tracking.arm_proposals`, ``arm_proposals``); with ``search``
-   swarm the best ``hypotheses`` of these flips and proposals each with a sub-swarm that refines
-   it apart from the track for most of the generations (:mod:`swarmpose.tracking.hypotheses`); every
+   mirror image (:mod:`swarmpose.tracking.arm_proposals`, ``arm_proposals``); searched by the
+   whole-pose swarm, the best ``hypotheses`` of these flips and proposals each with a sub-swarm that
+   refines it apart from the track for most of the generations (:mod:`swarmpose.tracking.hypotheses`); every
    ``recheck`` frames the start's facings, refitted from the detection, compete as particles
    too. Without one (the first frame, or after the track was lost: state *init*), the torso
    pose of J^e (:func:`swarmpose.tracking.init_pose.torso_pose`) with the body's rest angles,
@@ -21,7 +21,7 @@ Per frame (:meth:`BodyTracker.step`):
    search, the others join it as particles. No manual initialisation.
 3. **Search**. PSO of ``E = w_D·E_D + w_J·E_J``: offline (``search`` swarm, or auto) the paper's
    (canonical or perturbed) of the whole pose, with the hypotheses' sub-swarms; live (``search``
-   blocks, or auto with a frame budget) a quarter of the generations so, then block by block, each
+   blocks, or auto with a frame budget) the same for a quarter of the generations, then block by block, each
    particle moving the root, the trunk or one limb of a pose the swarm shares, each flip and
    proposal starting a particle of its limb's sub-swarm (:mod:`swarmpose.tracking.block_pso`). A
    start, and a frame whose seeds hold another facing (re-checked facings, a challenger), search
@@ -312,9 +312,8 @@ class BodyTracker:
         if hidden:
             with timed(timings, "hidden"):
                 targets = without_hidden_lifts(self.body, centre, targets, self.intrinsics, scene)
-        offline = max(pso.generations, self.config.start_budget)  # a re-check refits the start's facings
-        recheck = recheck_facings(self, frame.index, lifted, targets, depth, rng, timings,
-                                  pso.generations if self.budget_ms > 0 else offline)
+        refit = pso.generations if self.budget_ms > 0 else max(pso.generations, self.config.start_budget)
+        recheck = recheck_facings(self, frame.index, lifted, targets, depth, rng, timings, refit)  # the start's facings
         torso = torso_pose(self.body, lifted, centre[7:], upright=False)
         offset = np.abs(torso[:3] - centre[:3]) if torso is not None else np.zeros(3)
         radius = search.angle_radius(self.body, self.intrinsics, centre, targets)

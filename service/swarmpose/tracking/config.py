@@ -37,11 +37,11 @@ class TrackerConfig:
     pso: str = setting("perturbed", "PSO variant", choices=VARIANTS)
     search: str = setting("auto", "tracked frames: blocks (a particle moves one limb of a shared pose), swarm ("
                                   "the paper), auto (blocks live)", choices=SEARCHES)
-    """auto: block by block on a live frame with a frame budget (its short search gains most: live
-    emulation 89 -> 72-74 mm), the whole-pose swarm offline, where the blocks still lose a track now
-    and then (two of the matrix's 45 cells at seed 0, BENCHMARKS.md). A track's start and frames
-    where other facings compete search with the whole-pose swarm either way. The PSO variant's
-    perturbation and the sub-swarms (``hypotheses``) are the whole-pose swarm's."""
+    """auto: block by block on a live frame with a frame budget (its short search gains most), the
+    whole-pose swarm offline, until the blocks are measured there on every benchmark
+    (BENCHMARKS.md). A track's start and frames where other facings compete search with the
+    whole-pose swarm either way. The PSO variant's perturbation and the sub-swarms
+    (``hypotheses``) are the whole-pose swarm's."""
     depth_weight: float | None = setting(None, "w_D (auto: the mode's)", kind="float?", minimum=0)
     joints_weight: float | None = setting(None, "w_J (auto: the mode's)", kind="float?", minimum=0)
     tile: tuple[int, int] = setting((64, 64), "depth tile WxH pixels over the person's box", kind="size")
