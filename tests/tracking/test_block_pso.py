@@ -169,3 +169,4 @@ def test_the_frame_search_runs_the_whole_swarm_first_then_the_blocks_at_the_same
         assert one_block == (k > first), k  # the whole swarm moves every column, the blocks one block each
     assert np.all(np.diff(result.history) <= 0)
     assert result.value == pytest.approx(min(separable(c).min() for c in calls))
+

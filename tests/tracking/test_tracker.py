@@ -275,22 +275,28 @@ def searched_by_blocks(tracker: BodyTracker) -> list[bool]:
     return seen
 
 
-def test_a_live_tracked_frame_searches_block_by_block_and_an_offline_one_with_the_whole_swarm(body, sequence):
+def test_a_live_tracked_frame_searches_block_by_block_and_an_offline_one_with_the_whole_swarm(body, sequence,
+                                                                                               monkeypatch):
     """``search`` auto (the default): with a frame budget a tracked frame's swarm runs block by block
     after its first generations (:mod:`swarmpose.tracking.block_pso`), except where re-checked facings
     compete (a young track's frames 1, 2 and 4) and at the start; offline every search is the
     whole-pose swarm's, as with ``search`` swarm; ``search`` blocks searches block by block offline
     too. Each follows the walker (31-32 mm measured)."""
+    import swarmpose.tracking.block_pso as block_pso
+    import swarmpose.tracking.body_tracker as body_tracker
+
     intr = Intrinsics.load(sequence / "intrinsic.json")
     for search, budget_ms, by_blocks in (("auto", 60.0, True), ("auto", 0.0, False), ("blocks", 0.0, True),
                                          ("swarm", 60.0, False)):
         tracker = BodyTracker(body, intr, TrackerConfig(particles=24, generations=8, search=search))
         tracker.budget_ms, tracker.frame_period_s = budget_ms, 1 / 15
-        seen = searched_by_blocks(tracker)
+        seen, ran = searched_by_blocks(tracker), []
+        monkeypatch.setattr(body_tracker, "whole_then_blocks",
+                            lambda *args, real=block_pso.whole_then_blocks, ran=ran: ran.append(1) or real(*args))
         results = [tracker.step(frame, det) for frame, det in frames_of(sequence)]
         assert all(r.state != "lost" for r in results)
         quiet = [r for r in results[1:] if "recheck" not in r.timings_ms]  # tracked, no facing re-checked
-        assert quiet and seen.count(True) == (len(quiet) if by_blocks else 0), (search, budget_ms)
+        assert quiet and seen.count(True) == len(ran) == (len(quiet) if by_blocks else 0), (search, budget_ms)
         assert errors_mm(results, sequence).mean() < 50.0
 
 

@@ -19,7 +19,7 @@ scores it, whose best becomes the context):
 * then every block whose best gain is below 0 is taken into the context, and that sub-swarm's
   gains are counted from its new best. The blocks' gains add up only roughly (a limb moved in
   front of another's pixels), so a merged context that scores worse than the best pose scored so
-  far gives way to that pose.
+  far gives way to that pose, and the gains counted from it are forgotten.
 
 Every scored row is a whole pose, so the result is the best of all of them, and each particle's
 personal best is the best whole pose it was part of (what the facing hold and the polish read).
@@ -85,15 +85,17 @@ def _reference(context_value: float, best_value: float) -> float:
 
 
 def _start_at_proposals(position: np.ndarray, rows_of: list[np.ndarray], blocks: tuple[np.ndarray, ...],
-                        proposals: Sequence[tuple[int, np.ndarray]]) -> None:
-    """Writes each proposal's block values over a particle of its block's sub-swarm (in place)."""
+                        proposals: Sequence[tuple[int, np.ndarray]], lo: np.ndarray, hi: np.ndarray) -> None:
+    """Writes each proposal's block values over a particle of its block's sub-swarm (at least one
+    per block), within [lo, hi] (in place)."""
     placed = [0] * len(blocks)
     for block, pose in proposals:
         rows = rows_of[block]
-        if placed[block] >= int(PROPOSAL_SHARE * len(rows)):
+        if placed[block] >= max(int(PROPOSAL_SHARE * len(rows)), 1):
             continue
         placed[block] += 1
         position[rows[-placed[block]], blocks[block]] = np.asarray(pose)[blocks[block]]
+    np.clip(position, lo, hi, out=position)
 
 
 def minimise_blocks(objective: Callable[[np.ndarray], np.ndarray], start: np.ndarray, lo: np.ndarray,
@@ -132,7 +134,7 @@ def minimise_blocks(objective: Callable[[np.ndarray], np.ndarray], start: np.nda
     context = best.copy()
     position, velocity = x.copy(), np.zeros_like(x)  # a particle's own block in its block's columns
     rows_of = [np.flatnonzero(member == b) for b in range(len(blocks))]
-    _start_at_proposals(position, rows_of, blocks, proposals)
+    _start_at_proposals(position, rows_of, blocks, proposals, lo, hi)
     own, own_gain = position.copy(), np.full(count, np.inf)
     omega = config.omega
     for k in range(1, config.generations + 1):
@@ -157,10 +159,12 @@ def minimise_blocks(objective: Callable[[np.ndarray], np.ndarray], start: np.nda
         improved = values < whole_values
         whole[improved], whole_values[improved] = trial[improved], values[improved]
         g = int(np.argmin(values))
+        merge_failed = values[0] > best_value  # the last merge scored worse than a pose before it
         if values[g] < best_value:
             best, best_value = trial[g].copy(), float(values[g])
-        if values[0] > best_value:  # the last merge did not pay: back to the best pose scored
+        if merge_failed:  # back to the best pose scored; gains counted from the discarded context are void
             context = best.copy()
+            own_gain[:] = np.inf
         for b, rows in enumerate(rows_of):
             leader = rows[np.argmin(own_gain[rows])]
             if own_gain[leader] < 0:

@@ -19,11 +19,12 @@ Per frame (:meth:`BodyTracker.step`):
    turned to each of four facings (side and back views make its facing unreliable), starts one
    PSO over wide angle ranges each; the best fit by the objective is the centre of the normal
    search, the others join it as particles. No manual initialisation.
-3. **Search**. PSO of ``E = w_D·E_D + w_J·E_J``: offline (``search`` swarm, or auto) the paper's
-   (canonical or perturbed) of the whole pose, with the hypotheses' sub-swarms; live (``search``
-   blocks, or auto with a frame budget) the same for a quarter of the generations, then block by block, each
-   particle moving the root, the trunk or one limb of a pose the swarm shares, each flip and
-   proposal starting a particle of its limb's sub-swarm (:mod:`swarmpose.tracking.block_pso`). A
+3. **Search**. PSO of ``E = w_D·E_D + w_J·E_J``: with ``search`` swarm (and auto offline) the
+   paper's (canonical or perturbed) of the whole pose, with the hypotheses' sub-swarms; with
+   ``search`` blocks (and auto with a frame budget, live) the whole-pose swarm without sub-swarms
+   for a quarter of the generations, then block by block, each particle moving the root, the
+   trunk or one limb of a pose the swarm shares, each flip and proposal (none on a lean live
+   frame) starting a particle of its limb's sub-swarm (:mod:`swarmpose.tracking.block_pso`). A
    start, and a frame whose seeds hold another facing (re-checked facings, a challenger), search
    with the whole-pose swarm: a turned pose must be refined whole to compete with the track, which
    blocks of it cannot do. With ``polish``, a local
@@ -247,7 +248,8 @@ class BodyTracker:
             start[i] = s
         t1 = time.perf_counter()
         self.objective.set_frame(depth, box, targets, centre)
-        blocks = state == "tracking" and not contested and self.searches_by_blocks()
+        blocks = (state == "tracking" and not contested and self.searches_by_blocks()
+                  and pso.particles > len(BLOCKS))  # the shared pose and a particle a block at least
         groups = None
         if state == "tracking" and not blocks:  # the ranking's time is its own, not the search's
             with timed(timings, "hypotheses"):
@@ -383,7 +385,7 @@ class BodyTracker:
         blocks: block by block (:mod:`swarmpose.tracking.block_pso`), at full resolution, without
         sub-swarms, each of ``proposals`` (whole poses, the previous pose with one limb changed)
         starting a particle of its limb's sub-swarm."""
-        if blocks and len(start) > len(BLOCKS):
+        if blocks:
             changed = [(changed_block(p, self.previous), p) for p in proposals]
             return whole_then_blocks(objective, start, self.lo, self.hi, rng, pso, search.renormalise, search.perturb,
                                      [(b, p) for b, p in changed if b is not None])

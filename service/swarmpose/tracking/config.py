@@ -48,7 +48,8 @@ class TrackerConfig:
     triangles: int = setting(1500, "tracking level of detail of the body mesh, triangles", minimum=100)
     coarse_share: float = setting(0.0, "share of each PSO's generations scored at the coarse tile and triangles "
                                        "(0 = off)", minimum=0.0, maximum=1.0)
-    """Off by default: scoring generations on the coarse tile and mesh costs accuracy."""
+    """Off by default: scoring generations on the coarse tile and mesh costs accuracy. Frames
+    searched block by block (``search``) score at full resolution throughout."""
     coarse_tile: tuple[int, int] = setting((32, 32), "depth tile WxH pixels of the coarse generations", kind="size")
     coarse_triangles: int = setting(500, "level of detail of the body mesh in the coarse generations, triangles",
                                     minimum=100)
