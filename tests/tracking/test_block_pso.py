@@ -20,6 +20,17 @@ def separable(x: np.ndarray) -> np.ndarray:
     return np.sum(d * d + 0.3 * np.abs(np.sin(5.0 * d)), axis=1)
 
 
+def recording(f):
+    """``f`` wrapped to keep a copy of every batch it scores, and that list."""
+    calls = []
+
+    def wrapped(x):
+        calls.append(x.copy())
+        return f(x)
+
+    return wrapped, calls
+
+
 def box(dim: int = 36) -> tuple[np.ndarray, np.ndarray]:
     return np.full(dim, -2.0), np.full(dim, 2.0)
 
@@ -36,12 +47,7 @@ def test_particles_are_dealt_to_the_blocks_after_the_context():
 
 
 def test_each_particle_moves_one_block_of_the_context_and_row_0_is_the_context():
-    calls = []
-
-    def f(x):
-        calls.append(x.copy())
-        return separable(x)
-
+    f, calls = recording(separable)
     lo, hi = box()
     start = np.random.default_rng(0).uniform(-0.6, 0.6, (20, 36))
     result = minimise_blocks(f, start, lo, hi, np.random.default_rng(1), PsoConfig(particles=20, generations=5))
@@ -132,12 +138,7 @@ def test_a_proposal_starts_a_particle_of_its_block_and_is_scored_in_the_context(
     start[0] = centre
     proposal = centre.copy()
     proposal[BLOCKS[2]] = TARGET[BLOCKS[2]]
-    calls = []
-
-    def f(x):
-        calls.append(x.copy())
-        return separable(x)
-
+    f, calls = recording(separable)
     config = PsoConfig(particles=32, generations=8)
     with_it = minimise_blocks(f, start, lo, hi, np.random.default_rng(6), config, proposals=[(2, proposal)])
     member = block_of_particles(32, len(BLOCKS))
@@ -151,12 +152,7 @@ def test_a_proposal_starts_a_particle_of_its_block_and_is_scored_in_the_context(
 def test_the_frame_search_runs_the_whole_swarm_first_then_the_blocks_at_the_same_cost():
     from swarmpose.tracking.block_pso import WHOLE_SHARE, whole_then_blocks
 
-    calls = []
-
-    def f(x):
-        calls.append(x.copy())
-        return separable(x)
-
+    f, calls = recording(separable)
     lo, hi = box()
     start = np.random.default_rng(8).uniform(-0.6, 0.6, (32, 36))
     config = PsoConfig(particles=32, generations=12)

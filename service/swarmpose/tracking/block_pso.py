@@ -38,7 +38,7 @@ from dataclasses import replace
 import numpy as np
 
 from swarmpose.core.errors import ConfigError
-from swarmpose.tracking.pso import PsoConfig, PsoResult, minimise
+from swarmpose.tracking.pso import PsoConfig, PsoResult, group_leaders, group_members, minimise
 from swarmpose.tracking.search import LIMB_COLUMNS
 
 BLOCKS: tuple[np.ndarray, ...] = (np.arange(7), LIMB_COLUMNS[4], *LIMB_COLUMNS[:4])
@@ -133,16 +133,14 @@ def minimise_blocks(objective: Callable[[np.ndarray], np.ndarray], start: np.nda
     history = [best_value]
     context = best.copy()
     position, velocity = x.copy(), np.zeros_like(x)  # a particle's own block in its block's columns
-    rows_of = [np.flatnonzero(member == b) for b in range(len(blocks))]
+    members = group_members(member)  # the context alone, then each block's sub-swarm
+    rows_of = members[1:]
     _start_at_proposals(position, rows_of, blocks, proposals, lo, hi)
     own, own_gain = position.copy(), np.full(count, np.inf)
     omega = config.omega
     for k in range(1, config.generations + 1):
         if k > 1:  # generation 1 scores the start's blocks in the context
-            lead = own.copy()
-            for rows in rows_of:
-                leader = rows[np.argmin(own_gain[rows])]
-                lead[rows] = own[leader]
+            lead = own[group_leaders(own_gain, members)]
             r1, r2 = rng.random((2, count, dim))
             pull = config.c1 * r1 * (own - position) + config.c2 * r2 * (lead - position)
             velocity = np.where(mask, omega * (velocity + pull), 0.0)
