@@ -21,13 +21,13 @@ def test_a_record_made_before_a_setting_existed_reads_as_what_the_tracker_did_th
     """Records written before arm_prior, limb_flips, hidden_lifts, arm_proposals, hypotheses, polish,
     box_hold and search existed lack them: they were made with the prior off (0, still its default),
     without flips, with every lift in the 3D term, without arm proposals, sub-swarms or polish, with
-    the detector's box following the joints every frame and with the whole-pose swarm (``search``
-    auto offline), so they resume a run with those off, and neither the default run nor one with the
-    prior on or block by block."""
+    the detector's box following the joints every frame and with the whole-pose swarm at 64
+    generations (``search`` auto offline), so they resume a run with those off, and neither the
+    default run nor one with the prior on or block by block."""
     path = tmp_path / "old.json"
     write_record(path, {"mpjpe_mm": 50.0, "particles": 64, "generations": 64, "max_people": 1})
     then = {"limb_flips": False, "hidden_lifts": False, "arm_proposals": False, "hypotheses": 0, "polish": 0,
-            "box_hold": 0.0}
+            "box_hold": 0.0, "search": "auto", "generations": 64}
     assert read_record(path, tracker_settings(then))["mpjpe_mm"] == 50.0
     assert read_record(path, tracker_settings(None)) is None, "the default run has flips"
     assert read_record(path, tracker_settings({"limb_flips": False})) is None, "and drops hidden lifts"

@@ -16,7 +16,7 @@ if TYPE_CHECKING:  # the objective (body model, scipy) is imported where the wei
 MODES = ("hybrid", "depth", "joints", "lift")
 VARIANTS = ("canonical", "perturbed")
 """The PSO variants (:mod:`swarmpose.tracking.pso`)."""
-SEARCHES = ("auto", "blocks", "swarm")
+SEARCHES = ("blocks", "swarm", "auto")
 """A tracked frame's search: block by block (:mod:`swarmpose.tracking.block_pso`), the paper's
 whole-pose swarm (:mod:`swarmpose.tracking.pso`), or (auto) the former on a live frame with a frame
 budget and the latter offline."""
@@ -33,15 +33,14 @@ class TrackerConfig:
                                   "model)", choices=MODES)
     """depth mode: the joints still (re)start a track."""
     particles: int = setting(64, "PSO particles per generation", minimum=1)
-    generations: int = setting(64, "PSO generations per frame", minimum=1)
+    generations: int = setting(32, "PSO generations per frame (the paper's swarm: 64)", minimum=1)
     pso: str = setting("perturbed", "PSO variant", choices=VARIANTS)
-    search: str = setting("auto", "tracked frames: blocks (a particle moves one limb of a shared pose), swarm ("
-                                  "the paper), auto (blocks live)", choices=SEARCHES)
-    """auto: block by block on a live frame with a frame budget (its short search gains most), the
-    whole-pose swarm offline, until the blocks are measured there on every benchmark
-    (BENCHMARKS.md). A track's start and frames where other facings compete search with the
-    whole-pose swarm either way. The PSO variant's perturbation and the sub-swarms
-    (``hypotheses``) are the whole-pose swarm's."""
+    search: str = setting("blocks", "tracked frames: blocks (a particle moves one limb of a shared pose), swarm ("
+                                    "the paper), auto (blocks live)", choices=SEARCHES)
+    """Block by block, 32 generations track as well as the paper's swarm at 64 on the matrix, the
+    crossing and UTD-MHAD, in half the search (BENCHMARKS.md). A track's start and frames where
+    other facings compete search with the whole-pose swarm either way. The PSO variant's
+    perturbation and the sub-swarms (``hypotheses``) are the whole-pose swarm's."""
     depth_weight: float | None = setting(None, "w_D (auto: the mode's)", kind="float?", minimum=0)
     joints_weight: float | None = setting(None, "w_J (auto: the mode's)", kind="float?", minimum=0)
     tile: tuple[int, int] = setting((64, 64), "depth tile WxH pixels over the person's box", kind="size")
