@@ -37,10 +37,10 @@ class TrackerConfig:
     pso: str = setting("perturbed", "PSO variant", choices=VARIANTS)
     search: str = setting("blocks", "tracked frames: blocks (a particle moves one limb of a shared pose), swarm ("
                                     "the paper), auto (blocks live)", choices=SEARCHES)
-    """Block by block, 32 generations track as well as the paper's swarm at 64 on the matrix, the
-    crossing and UTD-MHAD, in half the search (BENCHMARKS.md). A track's start and frames where
-    other facings compete search with the whole-pose swarm either way. The PSO variant's
-    perturbation and the sub-swarms (``hypotheses``) are the whole-pose swarm's."""
+    """Every tracked frame block by block (``generations`` 32; docs/tracking.md says why); swarm with
+    ``generations`` 64 is the paper's search. A track's start and frames where other facings
+    compete search with the whole-pose swarm either way. The PSO variant's perturbation and the
+    sub-swarms (``hypotheses``) are the whole-pose swarm's."""
     depth_weight: float | None = setting(None, "w_D (auto: the mode's)", kind="float?", minimum=0)
     joints_weight: float | None = setting(None, "w_J (auto: the mode's)", kind="float?", minimum=0)
     tile: tuple[int, int] = setting((64, 64), "depth tile WxH pixels over the person's box", kind="size")
