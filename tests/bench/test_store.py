@@ -34,6 +34,15 @@ def test_a_record_made_before_a_setting_existed_reads_as_what_the_tracker_did_th
     assert read_record(path, tracker_settings({"arm_prior": 1.0, **then})) is None
     assert read_record(path, tracker_settings({"particles": 32, **then})) is None
     assert read_record(path, tracker_settings({**then, "search": "blocks"})) is None, "the whole swarm's"
+    assert read_record(path, tracker_settings({**then, "search": "swarm"}))["mpjpe_mm"] == 50.0, "auto is the swarm"
+
+
+def test_a_record_made_with_search_auto_resumes_a_run_with_the_swarm_and_not_one_with_blocks(tmp_path):
+    """The benchmarks have no frame budget, so ``search`` auto ran the whole-pose swarm."""
+    path = tmp_path / "cell.json"
+    write_record(path, {"mpjpe_mm": 44.1, **tracker_settings({"search": "auto", "generations": 64})})
+    assert read_record(path, tracker_settings({"search": "swarm", "generations": 64}))["mpjpe_mm"] == 44.1
+    assert read_record(path, tracker_settings({"search": "blocks", "generations": 64})) is None
 
 
 def test_a_record_made_without_flips_does_not_resume_a_default_run(tmp_path):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from swarmpose.core.errors import ConfigError
-from swarmpose.tracking.block_pso import BLOCKS, block_of_particles, minimise_blocks
+from swarmpose.tracking.block_pso import BLOCKS, WHOLE_SHARE, block_of_particles, minimise_blocks, whole_then_blocks
 from swarmpose.tracking.pso import PsoConfig, minimise
 from swarmpose.tracking.search import pose_bounds, renormalise
 
@@ -150,8 +150,6 @@ def test_a_proposal_starts_a_particle_of_its_block_and_is_scored_in_the_context(
 
 
 def test_the_frame_search_runs_the_whole_swarm_first_then_the_blocks_at_the_same_cost():
-    from swarmpose.tracking.block_pso import WHOLE_SHARE, whole_then_blocks
-
     f, calls = recording(separable)
     lo, hi = box()
     start = np.random.default_rng(8).uniform(-0.6, 0.6, (32, 36))
