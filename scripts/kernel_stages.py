@@ -31,7 +31,7 @@ STAGES = ("FK and joint terms", "clear, skin, project", "triangle scan", "raster
 
 # (text in score.cl after which the stage ends, what the early return writes)
 CUTS = {
-    2: ("#if WG == 1\n    /* two passes", "lverts[p % NV].x"),
+    2: ("    /* one work-item: two passes", "lverts[p % NV].x"),
     3: ("    raster_kept(zbuf, lverts, tris, lkeep, kept);", "(float)kept"),
     4: ("#if WG == 1 && TW % 8 == 0\n    /* 8 pixels", "(float)zbuf[p % NPIX]"),
 }

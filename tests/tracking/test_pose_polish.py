@@ -46,7 +46,8 @@ def test_the_polish_walks_down_a_known_bowl_and_never_up():
     before = float(objective(start[None])[0])
     calls.clear()
     best, value = polish_pose(objective, start, 200, np.random.default_rng(0))
-    assert calls == [1] + [32] * 200  # the start, then one batch of 32 a round
+    assert calls[:200] == [32] * 200 and calls[200:] in ([], [1])  # a batch of 32 a round (the first holds the
+    # start), then the last merged pose where it was not scored
     assert np.isclose(value, objective(best[None])[0])  # the value is the returned pose's
     assert value < 0.1 * before, (value, before)
     lo, hi = pose_bounds()
@@ -79,12 +80,15 @@ def test_a_minimum_beyond_the_angle_limits_is_met_at_the_limits_and_non_finite_v
     target[7:] = hi[7:] + 0.5  # every angle's minimum lies past its upper limit
     bowl_of, _ = bowl(target, np.full(36, 0.05))
 
-    def objective(poses: np.ndarray) -> np.ndarray:  # NaN for a third of the copies, and at the start
+    nan_draw = np.random.default_rng(8)
+
+    def objective(poses: np.ndarray) -> np.ndarray:  # NaN for a random third of the copies, and at the start
         values = bowl_of(poses)
-        values[::3] = np.nan
+        values[nan_draw.random(len(values)) < 1 / 3] = np.nan
+        values[np.all(poses == start, axis=1)] = np.nan
         return values
 
-    best, value = polish_pose(objective, start, 150, np.random.default_rng(2))
+    best, value = polish_pose(objective, start, 300, np.random.default_rng(2))  # ~4 rad from the start
     assert np.isfinite(value) and np.isclose(value, bowl_of(best[None])[0])
     assert np.all(best[7:] <= hi[7:]) and np.all(best[7:] >= lo[7:])
     assert np.mean(hi[7:] - best[7:]) < 0.25 * np.mean(hi[7:] - start[7:])  # pressed towards the limits
