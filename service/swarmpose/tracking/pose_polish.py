@@ -89,12 +89,13 @@ def polish_pose(objective: Callable[[np.ndarray], np.ndarray], pose: np.ndarray,
         trial[1:] = renormalise(np.clip(trial[1:], lo, hi))
         values = np.asarray(objective(trial), float)
         values = np.where(np.isfinite(values), values, np.inf)
+        reference = min(values[0], context_value)
+        merge_failed = reference > best_value  # the last merge scored worse than a pose before it
         k = int(np.argmin(values))
         if values[k] < best_value:
             best, best_value = trial[k].copy(), float(values[k])
         scored = True
-        reference = min(values[0], context_value)
-        if reference > best_value:  # the last merge scored worse than a pose before it
+        if merge_failed:
             context, context_value = best.copy(), best_value
             continue
         merged = []
