@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from swarmpose.bench.store import polish_kind, read_record, render_whole, tracker_settings, write_record
+from swarmpose.bench.store import read_record, render_whole, tracker_settings, write_record
 
 
 def test_a_record_is_read_back_only_with_its_own_settings(tmp_path):
@@ -132,35 +132,19 @@ def test_records_without_the_backward_pass_resume_runs_without_it_and_lift_never
 
 
 def test_the_polish_acts_in_the_hybrid_records_only_and_older_records_read_as_without_it(tmp_path):
-    """``polish`` (30 by default) is stored with every record; the baseline modes (joints, depth,
+    """``polish`` (60 by default) is stored with every record; the baseline modes (joints, depth,
     lift) are made and resumed with 0 whatever was asked, so their records made before the setting
     existed resume a default run; a hybrid record made before it resumes only ``--polish 0``."""
     from swarmpose.bench.store import mode_settings
 
-    assert tracker_settings(None)["polish"] == 30
+    assert tracker_settings(None)["polish"] == 60
     for mode in ("hybrid", "joints", "depth", "lift"):
         settings = mode_settings(tracker_settings(None), mode)
-        assert settings["polish"] == (30 if mode == "hybrid" else 0), mode
+        assert settings["polish"] == (60 if mode == "hybrid" else 0), mode
         old = tmp_path / f"old-{mode}.json"
         write_record(old, {"mpjpe_mm": 45.0, **{k: v for k, v in settings.items() if k != "polish"}})
-        assert (read_record(old, {**settings, **polish_kind(settings)}) is None) == (mode == "hybrid"), mode
-        zero = mode_settings(tracker_settings({"polish": 0}), mode)
-        assert read_record(old, {**zero, **polish_kind(zero)})["mpjpe_mm"] == 45.0
-
-
-def test_a_record_polished_before_the_block_polish_resumes_no_polished_run(tmp_path):
-    """Records made before ``polish_by`` polished with copies that moved any coordinates: the same
-    rounds moved poses otherwise, so they resume no run that polishes; unpolished ones still resume."""
-    polished = tracker_settings({"polish": 60})
-    old, new = tmp_path / "old.json", tmp_path / "new.json"
-    write_record(old, {"mpjpe_mm": 41.0, **polished})  # no polish_by: made before it
-    write_record(new, {"mpjpe_mm": 39.0, **polished, **polish_kind(polished)})
-    assert polish_kind(polished) == {"polish_by": "blocks"} and polish_kind(tracker_settings({"polish": 0})) == {}
-    assert read_record(old, {**polished, **polish_kind(polished)}) is None
-    assert read_record(new, {**polished, **polish_kind(polished)})["mpjpe_mm"] == 39.0
-    unpolished = tracker_settings({"polish": 0})
-    write_record(old, {"mpjpe_mm": 44.0, **unpolished})
-    assert read_record(old, {**unpolished, **polish_kind(unpolished)})["mpjpe_mm"] == 44.0
+        assert (read_record(old, settings) is None) == (mode == "hybrid"), mode
+        assert read_record(old, mode_settings(tracker_settings({"polish": 0}), mode))["mpjpe_mm"] == 45.0
 
 
 def test_records_without_smoothing_resume_runs_without_it_and_lift_never_gets_it(tmp_path):

@@ -6,7 +6,6 @@ import numpy as np
 
 from swarmpose.body.kinematics import quaternion_multiply, root_turn_deg
 from swarmpose.body.skeleton import ANGLE_NAMES
-from swarmpose.tracking.block_pso import BLOCKS
 from swarmpose.tracking.pose_polish import WITHOUT_ARMS, polish_facings, polish_pose, polish_solution
 from swarmpose.tracking.pso import PsoResult
 from swarmpose.tracking.search import pose_bounds
@@ -47,34 +46,12 @@ def test_the_polish_walks_down_a_known_bowl_and_never_up():
     before = float(objective(start[None])[0])
     calls.clear()
     best, value = polish_pose(objective, start, 200, np.random.default_rng(0))
-    assert calls[:200] == [32] * 200 and calls[200:] in ([], [1])  # a batch of 32 a round (the first holds the
-    # start), then the last merged pose where it was not scored
+    assert calls == [1] + [32] * 200  # the start, then one batch of 32 a round
     assert np.isclose(value, objective(best[None])[0])  # the value is the returned pose's
     assert value < 0.1 * before, (value, before)
     lo, hi = pose_bounds()
     assert np.all(best >= lo) and np.all(best <= hi)
     assert np.isclose(np.linalg.norm(best[3:7]), 1.0)
-
-
-def test_one_round_takes_every_block_that_improved_and_the_merged_pose_beats_each_copy():
-    """On a separable bowl the blocks' gains add up exactly: after one round the pose holds the best
-    copy of every block that beat the start, scored once more, lower than any copy the round scored."""
-    rng = np.random.default_rng(9)
-    target = a_pose(rng)
-    start = np.clip(target + np.r_[np.zeros(7), rng.normal(0.0, 0.1, 29)], *pose_bounds())
-    objective, calls = bowl(target, np.full(36, 0.05))
-    scored = []
-
-    def recording(poses: np.ndarray) -> np.ndarray:
-        values = objective(poses)
-        scored.append(values)
-        return values
-
-    best, value = polish_pose(recording, start, 1, np.random.default_rng(3), WITHOUT_ARMS)
-    assert calls == [32, 1]  # the round (its copy 0 the start), then the merged pose
-    moved = [b for b, cols in enumerate(BLOCKS) if np.any(best[cols] != start[cols])]
-    assert len(moved) >= 2 and not {2, 3} & set(moved)  # several blocks at once, never an arm
-    assert np.isclose(value, objective(best[None])[0]) and value < scored[0].min()
 
 
 def test_coordinates_not_movable_stay_exactly_and_no_rounds_change_nothing():
@@ -102,15 +79,12 @@ def test_a_minimum_beyond_the_angle_limits_is_met_at_the_limits_and_non_finite_v
     target[7:] = hi[7:] + 0.5  # every angle's minimum lies past its upper limit
     bowl_of, _ = bowl(target, np.full(36, 0.05))
 
-    nan_draw = np.random.default_rng(8)
-
-    def objective(poses: np.ndarray) -> np.ndarray:  # NaN for a random third of the copies, and at the start
+    def objective(poses: np.ndarray) -> np.ndarray:  # NaN for a third of the copies, and at the start
         values = bowl_of(poses)
-        values[nan_draw.random(len(values)) < 1 / 3] = np.nan
-        values[np.all(poses == start, axis=1)] = np.nan
+        values[::3] = np.nan
         return values
 
-    best, value = polish_pose(objective, start, 300, np.random.default_rng(2))  # ~4 rad from the start
+    best, value = polish_pose(objective, start, 150, np.random.default_rng(2))
     assert np.isfinite(value) and np.isclose(value, bowl_of(best[None])[0])
     assert np.all(best[7:] <= hi[7:]) and np.all(best[7:] >= lo[7:])
     assert np.mean(hi[7:] - best[7:]) < 0.25 * np.mean(hi[7:] - start[7:])  # pressed towards the limits

@@ -41,15 +41,7 @@ from swarmpose.bench.detect import find_assets
 from swarmpose.bench.flip_metrics import flip_metrics
 from swarmpose.bench.hard_motions import FPS, HARD_MOTIONS, segment_frames
 from swarmpose.bench.matrix import DETECTORS, MODES, MOTIONS, Cell, Sequence, cells
-from swarmpose.bench.store import (
-    mode_settings,
-    polish_kind,
-    read_record,
-    render_whole,
-    seeded,
-    tracker_settings,
-    write_record,
-)
+from swarmpose.bench.store import mode_settings, read_record, render_whole, seeded, tracker_settings, write_record
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import EVAL_JOINTS, POSE_DIM
 from swarmpose.core.camera import Intrinsics
@@ -235,7 +227,7 @@ def track_cell(cell: Cell, mode: str, folder: Path, assets: Path, tracker: dict,
                            shape=cell.sequence.shape, tracker=TrackerConfig(mode=mode, **tracker), overlay=False)
     run = track_with_truth(config, frames)
     return {"cell": cell.name, "mode": mode, **asdict(cell.sequence), "props": list(cell.sequence.props),
-            "detector": cell.detector, **scores(run), **tracker, **polish_kind(tracker)}
+            "detector": cell.detector, **scores(run), **tracker}
 
 
 def run_matrix(out: Path, *, subset: str = "full", detectors: tuple[str, ...] | None = None,
@@ -264,7 +256,7 @@ def run_matrix(out: Path, *, subset: str = "full", detectors: tuple[str, ...] | 
             settings, suffix = seeded(mode_settings(tracker, mode), seed)
             path = out / "results" / f"{cell.name}-{mode}{suffix}.json"
             count = segment_frames(cell.sequence.motion, frames)
-            record = read_record(path, {"frames": count, **settings, **polish_kind(settings)})
+            record = read_record(path, {"frames": count, **settings})
             if record is None:
                 folder = make_sequence(cell.sequence, out / "sequences" / cell.sequence.name, count, root)
                 record = track_cell(cell, mode, folder, root, settings, count)

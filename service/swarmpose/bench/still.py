@@ -33,7 +33,7 @@ from swarmpose.bench.accuracy import TrackedRun, track_with_truth
 from swarmpose.bench.detect import find_assets
 from swarmpose.bench.matrix import DETECTORS
 from swarmpose.bench.still_plan import RUNS, SMOOTHINGS, StillPlan
-from swarmpose.bench.store import polish_kind, read_record, render_whole, tracker_settings, write_record
+from swarmpose.bench.store import read_record, render_whole, tracker_settings, write_record
 from swarmpose.body.loader import load_body
 from swarmpose.body.skeleton import EVAL_JOINTS
 from swarmpose.core.progress import progress_bar
@@ -116,7 +116,7 @@ def run_still(out: Path, plan: StillPlan | None = None, tracker: dict | None = N
     with progress_bar("bench still", len(todo), enabled=progress, unit="run") as bar:
         for shape, yaw, detector in todo:
             name = sequence_name(shape, yaw)
-            expected = {"plan": json.loads(json.dumps(plan.describe())), **settings, **polish_kind(settings)}
+            expected = {"plan": json.loads(json.dumps(plan.describe())), **settings}
             path = out / "results" / f"{name}-{detector}.json"
             record = read_record(path, expected)
             if record is None:

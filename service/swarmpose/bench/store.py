@@ -21,24 +21,13 @@ caller left them at their defaults (``bench utdmhad`` adds ``auto_height``, whic
 given shapes never use). The matrix's cells hold one person each, so its ``max_people`` is 1."""
 BEFORE_THE_SETTING = {**TRACKER_DEFAULTS, "limb_flips": False, "hidden_lifts": False, "arm_proposals": False,
                       "hypotheses": 0, "polish": 0, "auto_height": False, "lag_frames": 0.0,
-                      "box_hold": 0.0, "search": "swarm", "polish_by": "coordinates"}
+                      "box_hold": 0.0, "search": "swarm"}
 """What a record that lacks a setting was made with: the tracker's behaviour before the setting
 existed (its default then, or, for a new behaviour that is on by default now, off); UTD-MHAD
 records without ``lag_frames`` were scored against the files' own pairing of skeleton and depth;
-records without ``search`` were made by the whole-pose swarm, those without ``polish_by`` by the
-polish that moved a random quarter of every coordinate (:func:`polish_kind`)."""
+records without ``search`` were made by the whole-pose swarm."""
 OFFLINE_SEARCH = {"auto": "swarm"}
 """The search a ``search`` setting runs in these benchmarks, which have no frame budget: auto is the swarm."""
-
-
-POLISH_BY = "blocks"
-"""How the polish moves a pose now (:mod:`~swarmpose.tracking.pose_polish`: each copy one block)."""
-
-
-def polish_kind(settings: dict) -> dict:
-    """``{"polish_by": POLISH_BY}`` where ``settings`` polish (a record stores it and a resume compares
-    it: the same rounds moved poses otherwise before), else nothing (a record without polish still matches)."""
-    return {"polish_by": POLISH_BY} if int(settings.get("polish", 0)) > 0 else {}
 
 
 def tracker_settings(tracker: dict | None) -> dict:

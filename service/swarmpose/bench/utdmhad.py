@@ -57,7 +57,7 @@ import numpy as np
 from swarmpose.bench.accuracy import scores, track_with_truth
 from swarmpose.bench.detect import find_assets
 from swarmpose.bench.matrix import DETECTORS, MODES
-from swarmpose.bench.store import mode_settings, polish_kind, read_record, seeded, tracker_settings, write_record
+from swarmpose.bench.store import mode_settings, read_record, seeded, tracker_settings, write_record
 from swarmpose.bench.utdmhad_names import ACTIONS, SHAPES, SUBJECTS
 from swarmpose.core.errors import ConfigError
 from swarmpose.core.progress import progress_bar
@@ -118,7 +118,7 @@ def track_sequence(path: Path, mode: str, detector: str, shape: str, assets: Pat
     run = track_with_truth(config, frames)
     record = {"sequence": path.name.removesuffix("_depth.mat"), "action": int(match.group(1)),
               "subject": match.group(2), "mode": mode, "detector": detector, "shape": shape, "height_m": height,
-              "requested_frames": frames, "lag_frames": lag_frames, **scores(run), **tracker, **polish_kind(tracker)}
+              "requested_frames": frames, "lag_frames": lag_frames, **scores(run), **tracker}
     return record, run.estimates, run.truth
 
 
@@ -179,8 +179,7 @@ def run_utdmhad(out: Path, *, modes: tuple[str, ...] = MODES, detectors: tuple[s
 def _read(stem: Path, frames: int, tracker: dict, lag_frames: float) -> tuple[dict, np.ndarray, np.ndarray] | None:
     """(record, estimates, truth) stored under ``stem`` (.json, .npz) for these frames, tracker
     settings and skeleton lag; None when absent, made otherwise, or unreadable."""
-    record = read_record(stem.with_suffix(".json"), {"requested_frames": frames, "lag_frames": lag_frames, **tracker,
-                                                     **polish_kind(tracker)})
+    record = read_record(stem.with_suffix(".json"), {"requested_frames": frames, "lag_frames": lag_frames, **tracker})
     if record is None:
         return None
     try:

@@ -92,11 +92,11 @@ class TrackerConfig:
     track for the first 3/4 of the generations before they compete; 0: single particles."""
     hidden_lifts: bool = setting(True, "a joint hidden behind the body's own depth leaves the 3D joint term")
     """Its lift measured the occluder; the 2D term keeps it."""
-    polish: int = setting(30, "rounds of local search (32 poses each) after each frame's search (0 = off)",
+    polish: int = setting(60, "rounds of local search (32 poses each) after each frame's search (0 = off)",
                           minimum=0)
     """They take the best pose's root, spine, neck and legs further down the same objective (on a
-    young track the best of each facing, before they compete), block by block; the arms stay the
-    search's. Off: faster, without that refinement."""
+    young track the best of each facing, before they compete); the arms stay the search's. Off:
+    faster, without that refinement."""
     backward: int = setting(0, "offline: every N frames refit each track backwards over them, published N frames "
                                "late (0 = off)", minimum=0)
     """A track's start and a side view's limbs settle over frames, which the backward pass starts

@@ -1,17 +1,11 @@
-"""A local polish of one pose on one frame's objective: a batched (1+λ) evolution strategy, block by block.
+"""A local polish of one pose on one frame's objective: a batched (1+λ) evolution strategy.
 
 The tracker's per-frame search (a PSO spread around the previous pose at its frame budget) stops
 short of the frame's minimum; this polish takes the pose further down the same objective. Each
-round scores λ copies of the current pose in one batch: copy 0 is the current pose itself, the
-others are dealt to the pose's blocks in turn (:data:`~swarmpose.tracking.block_pso.BLOCKS`: the
-root, the trunk, each leg, each arm) and move a random third of their block's coordinates by
-Gaussian steps (root translation m, root quaternion and joint angles rad). Every block whose best
-copy beats copy 0 takes that copy's coordinates, so one round can improve each limb at once (their
-gains add up only roughly, so a merged pose that scores worse than the best scored so far gives
-way to it); each block's steps widen after a success and narrow after a failure. Poses stay within
-the angle limits, quaternions unit length; the result is the best pose scored, never worse than
-the start. Moving one block per copy finds in 30 rounds what 60 rounds of copies that each moved a
-random quarter of every coordinate found (docs/tracking.md).
+round moves a random quarter of the movable coordinates of λ copies of the current pose by
+Gaussian steps (root translation m, root quaternion and joint angles rad), keeps the best copy if
+it beats the current pose, and widens the steps after a success and narrows them after a failure. Poses stay within
+the angle limits, quaternions unit length; the result is never worse than the start.
 
 The tracker (``polish`` setting) moves everything but the arms (:data:`WITHOUT_ARMS`): a polished
 side-on arm follows the detector's wrong keypoints more closely.
@@ -33,88 +27,52 @@ from dataclasses import replace
 import numpy as np
 
 from swarmpose.body.kinematics import root_turn_deg
-from swarmpose.body.skeleton import POSE_DIM
-from swarmpose.tracking.block_pso import BLOCKS, block_of_particles
 from swarmpose.tracking.budget import POLISH_CANDIDATES
-from swarmpose.tracking.pso import PsoResult, group_members
+from swarmpose.tracking.pso import PsoResult
 from swarmpose.tracking.search import LIMB_COLUMNS, pose_bounds, renormalise
 
 STEP_ROOT_M = 0.015
 """The root translation's step (m, one standard deviation) at the start."""
 STEP_ANGLE_RAD = 0.06
 """The joint angles' step (rad) at the start; the root quaternion's entries take half."""
-SHARE_MOVED = 1 / 3
-"""Share of its block's movable coordinates one copy moves."""
+SHARE_MOVED = 0.25
+"""Share of the movable coordinates one copy moves (sparse steps find one limb's moves)."""
 
 WITHOUT_ARMS = np.ones(36, dtype=bool)
 """(36,) the pose's coordinates but both arms' (collar, shoulder, elbow) angles."""
 WITHOUT_ARMS[np.concatenate(LIMB_COLUMNS[:2])] = False
 
 
-def _polish_blocks(movable: np.ndarray | None) -> tuple[np.ndarray, ...]:
-    """The columns of each block (:data:`BLOCKS`) that ``movable`` (36,) bool allows (None: all), empty ones out."""
-    if movable is None:
-        return BLOCKS
-    return tuple(cols[movable[cols]] for cols in BLOCKS if np.any(movable[cols]))
-
-
 def polish_pose(objective: Callable[[np.ndarray], np.ndarray], pose: np.ndarray, iterations: int,
                 rng: np.random.Generator, movable: np.ndarray | None = None,
                 candidates: int = POLISH_CANDIDATES) -> tuple[np.ndarray, float]:
     """The best pose (36,) found from ``pose`` (36,) and its value: ``iterations`` rounds of
-    ``candidates`` poses each, scored in one batch by ``objective`` ((P, 36) -> (P,)), block by
-    block (module docstring), and the last merged pose once more where it was not scored.
+    ``candidates`` poses each, scored in one batch by ``objective`` ((P, 36) -> (P,)).
     ``movable``: (36,) bool, the coordinates the search may move (None: all). With no
     ``iterations`` the pose comes back as it is, its value NaN (nothing scored)."""
     if iterations <= 0:
         return np.asarray(pose, float), float("nan")
     lo, hi = pose_bounds()
-    blocks = _polish_blocks(movable)
-    member = block_of_particles(candidates, len(blocks))
-    rows_of = group_members(member)[1:]
-    in_block = np.zeros((candidates, POSE_DIM), dtype=bool)
-    for rows, cols in zip(rows_of, blocks):
-        in_block[np.ix_(rows, cols)] = True
-    step = np.full(POSE_DIM, STEP_ANGLE_RAD)
+    best = np.asarray(pose, float).copy()
+    best_value = float(np.asarray(objective(best[None]), float)[0])
+    best_value = best_value if np.isfinite(best_value) else np.inf  # a NaN start: any finite copy beats it
+    step = np.full(best.shape, STEP_ANGLE_RAD)
     step[:3], step[3:7] = STEP_ROOT_M, STEP_ANGLE_RAD / 2
-    scale = np.ones(len(blocks))
-    context = np.asarray(pose, float).copy()
-    context_value = np.inf  # the context's value where known (its copy 0 may score non-finite)
-    best, best_value = context.copy(), np.inf
-    scored = True  # whether the context is among the poses scored
+    scale = 1.0
     for _ in range(iterations):
-        row_scale = np.r_[0.0, scale[member[1:]]]
-        moved = in_block & (rng.random((candidates, POSE_DIM)) < SHARE_MOVED)
-        trial = context + moved * rng.normal(0.0, 1.0, (candidates, POSE_DIM)) * step * row_scale[:, None]
-        trial[1:] = renormalise(np.clip(trial[1:], lo, hi))
+        moved = rng.random((candidates, best.size)) < SHARE_MOVED
+        if movable is not None:
+            moved &= movable
+        trial = best + moved * rng.normal(0.0, 1.0, (candidates, best.size)) * step * scale
+        trial = renormalise(np.clip(trial, lo, hi))
         values = np.asarray(objective(trial), float)
         values = np.where(np.isfinite(values), values, np.inf)
-        reference = min(values[0], context_value)
-        merge_failed = reference > best_value  # the last merge scored worse than a pose before it
         k = int(np.argmin(values))
         if values[k] < best_value:
             best, best_value = trial[k].copy(), float(values[k])
-        scored = True
-        if merge_failed:
-            context, context_value = best.copy(), best_value
-            continue
-        merged = []
-        for b, rows in enumerate(rows_of):
-            lead = rows[np.argmin(values[rows])]
-            if values[lead] < reference:
-                context[blocks[b]] = trial[lead, blocks[b]]
-                scale[b] = min(scale[b] * 1.2, 2.0)
-                merged.append(lead)
-            else:
-                scale[b] *= 0.8
-        if merged:
-            context = renormalise(context[None])[0]
-            context_value = values[merged[0]] if len(merged) == 1 else np.inf
-            scored = len(merged) == 1
-    if not scored:
-        value = float(np.asarray(objective(context[None]), float)[0])
-        if np.isfinite(value) and value < best_value:
-            best, best_value = context, value
+            scale = min(scale * 1.2, 2.0)
+        else:
+            scale *= 0.8
     return best, best_value
 
 
