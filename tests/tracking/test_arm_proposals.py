@@ -25,6 +25,7 @@ from swarmpose.tracking.arm_proposals import (
     wrist_target,
 )
 from swarmpose.tracking.limb_flips import limb_columns, solve_limbs
+from tests.tracking.one_frame import detection_of, room_depth, step_from
 
 SIDE_ON = (0.0, np.cos(np.pi / 4), 0.0, np.sin(np.pi / 4))
 """The root quaternion of a body turned side on to the camera (FACING, then a quarter turn about the
@@ -171,8 +172,6 @@ def side_view(body, intr):
     (the hop of issue 12's matrix seen from the side), the depth rendered in a room, and the
     detection with its torso, legs and head but no arm keypoint (MoveNet scored them under 0.3)."""
     from swarmpose.body.skeleton import COCO17
-    from swarmpose.detect.joints import Joints2D
-    from swarmpose.sim.render import Renderer, Room
 
     rest = body.rest_pose((0.0, 0.0, 2.9), SIDE_ON)
     at = dict(zip(ARM_NAMES, body.posed_points(rest[None], ARM_NAMES)[0]))
@@ -182,13 +181,8 @@ def side_view(body, intr):
     toward = -s / np.linalg.norm(s)
     truth, miss = solve_limbs(body, rest, [near], np.array([[s + up * toward, s + (up + low) * toward]]))
     assert miss[0] < 0.01
-    room = Room(floor_point=np.array([0.0, 1.0, 0.0]), floor_normal=np.array([0.0, -1.0, 0.0]),
-                wall_point=np.array([0.0, 0.0, 4.5]), wall_normal=np.array([0.0, 0.0, -1.0]))
-    depth = Renderer(intr).render(body.pose(truth)[0], body.triangles, room)[0].astype(np.float32)
-    keypoints = intr.project(body.posed_points(truth, COCO17.points)[0])
     scores = np.array([0.0 if p is not None and ("elbow" in p or "wrist" in p) else 1.0 for p in COCO17.points])
-    detection = Joints2D(COCO17, np.column_stack([keypoints, scores]), 1, 0)
-    return truth[0], rest, near, depth, detection
+    return truth[0], rest, near, room_depth(body, truth[0], intr), detection_of(body, truth[0], intr, scores)
 
 
 def test_a_proposal_sends_the_near_arm_to_the_depth_in_front_of_the_shoulder(body):
@@ -217,19 +211,14 @@ def test_a_track_with_the_arm_hanging_finds_it_pointing_at_the_camera(body, prop
     """One frame of the tracker: with the proposals the search lands on the true near arm; without
     them (limb flips still on) it stays near the hanging arm, a swing of 90° away: the control that
     shows the proposals are what finds it."""
-    from swarmpose.sources.base import Frame
-    from swarmpose.tracking.body_tracker import BodyTracker
     from swarmpose.tracking.config import TrackerConfig
 
     intr = Intrinsics.kinect_v1()
     truth, hanging, near, depth, detection = side_view(body, intr)
-    tracker = BodyTracker(body, intr, TrackerConfig(particles=32, generations=32, recheck=0,
-                                                    arm_proposals=proposals))
-    tracker.previous, tracker.age = hanging.copy(), 10
-    tracker.history.restart(hanging.copy())
-    result = tracker.step(Frame(1, 33_333_333, depth, None, intr), detection)
+    config = TrackerConfig(particles=32, generations=32, recheck=0, arm_proposals=proposals)
+    found = step_from(body, intr, hanging, depth, detection, config)
     names = (near[1], near[2])
-    miss_m = np.linalg.norm(body.posed_points(result.found.pose[None], names)[0]
+    miss_m = np.linalg.norm(body.posed_points(found[None], names)[0]
                             - body.posed_points(truth[None], names)[0], axis=1).max()
     if proposals:
         assert miss_m < 0.06

@@ -7,7 +7,9 @@ import pytest
 
 from swarmpose.body.loader import load_body
 from swarmpose.core.camera import Intrinsics
+from swarmpose.tracking.config import TrackerConfig
 from swarmpose.tracking.limb_flips import FLIP_LIMBS, flip_targets, limb_flips, ray_points, solve_limbs
+from tests.tracking.one_frame import detection_of, room_depth, step_from
 
 INTR = Intrinsics(width=320, height=240, fx=285.0, fy=285.0, cx=160.0, cy=120.0)
 FACING = (0.0, 1.0, 0.0, 0.0)
@@ -130,13 +132,6 @@ def test_a_track_with_the_arm_behind_the_body_finds_it_in_front_again(body, flip
     (±0.25 rad around the track, the image not having moved) cannot reach it (0.62 m when written:
     a control that shows the flips are what finds the arm; the arm proposals, which find it too,
     are off in both)."""
-    from swarmpose.body.skeleton import COCO17
-    from swarmpose.detect.joints import Joints2D
-    from swarmpose.sim.render import Renderer, Room
-    from swarmpose.sources.base import Frame
-    from swarmpose.tracking.body_tracker import BodyTracker
-    from swarmpose.tracking.config import TrackerConfig
-
     intr = Intrinsics.kinect_v1()
     lod = body.tracking_lod(1500)
     truth = reaching_pose(lod)
@@ -146,18 +141,9 @@ def test_a_track_with_the_arm_behind_the_body_finds_it_in_front_again(body, flip
               if lod.posed_points(p[None], ("left_elbow",))[0, 0, 2] > true_arm[0, 2] + 0.2]
     assert behind, "the reaching arm has a mirror behind the shoulder"
     wrong = behind[0]
-    room = Room(floor_point=np.array([0.0, 1.0, 0.0]), floor_normal=np.array([0.0, -1.0, 0.0]),
-                wall_point=np.array([0.0, 0.0, 4.5]), wall_normal=np.array([0.0, 0.0, -1.0]))
-    depth = Renderer(intr).render(lod.pose(truth[None])[0], lod.triangles, room)[0].astype(np.float32)
-    keypoints = intr.project(lod.posed_points(truth[None], COCO17.points)[0])
-    detection = Joints2D(COCO17, np.column_stack([keypoints, np.ones(len(keypoints))]), 1, 0)
-
-    tracker = BodyTracker(lod, intr, TrackerConfig(particles=32, generations=32, recheck=0, limb_flips=flips,
-                                                  arm_proposals=False))
-    tracker.previous, tracker.age = wrong.copy(), 10
-    tracker.history.restart(wrong.copy())
-    result = tracker.step(Frame(1, 33_333_333, depth, None, intr), detection)
-    found = lod.posed_points(result.found.pose[None], names)[0]
+    config = TrackerConfig(particles=32, generations=32, recheck=0, limb_flips=flips, arm_proposals=False)
+    pose = step_from(lod, intr, wrong, room_depth(lod, truth, intr), detection_of(lod, truth, intr), config)
+    found = lod.posed_points(pose[None], names)[0]
     miss_m = np.linalg.norm(found - true_arm, axis=1).max()
     if flips:
         assert miss_m < 0.05

@@ -8,7 +8,8 @@ Per frame (:meth:`BodyTracker.step`):
 2. **Start**. With a previous solution (state *tracking*), particles start around it in a
    region that contains J^e (:mod:`swarmpose.tracking.search`); the last 5 solutions and
    the J^e torso pose are injected as particles, and so are the previous solution's limbs
-   mirrored along the line of sight (:mod:`swarmpose.tracking.limb_flips`, ``limb_flips``),
+   mirrored along the line of sight and its left and right legs, and arms, exchanged
+   (:mod:`swarmpose.tracking.limb_flips`, :mod:`swarmpose.tracking.limb_exchanges`, ``limb_flips``),
    and its arms sent to depth within reach that its body does not explain and to each other's
    mirror image (:mod:`swarmpose.tracking.arm_proposals`, ``arm_proposals``); searched by the
    whole-pose swarm, the best ``hypotheses`` of these flips and proposals each with a sub-swarm that
@@ -70,6 +71,7 @@ from swarmpose.tracking.hypotheses import MERGE_SHARE, hypothesis_groups
 from swarmpose.tracking.init_pose import NO_TORSO, torso_pose
 from swarmpose.tracking.lift import lifted_body
 from swarmpose.tracking.lifted_limbs import lifted_limb_seeds
+from swarmpose.tracking.limb_exchanges import limb_exchanges
 from swarmpose.tracking.limb_flips import limb_flips
 from swarmpose.tracking.objective import JointTargets, Objective, search_split
 from swarmpose.tracking.one_euro import PoseFilter
@@ -335,7 +337,8 @@ class BodyTracker:
             room = pso.particles - len(seeds) - len(proposals)
         if self.config.limb_flips and room > 0 and not lean:
             with timed(timings, "flips"):
-                proposals += limb_flips(self.body, centre, most=room)
+                proposals += limb_exchanges(self.body, centre)[:room]
+                proposals += limb_flips(self.body, centre, most=pso.particles - len(seeds) - len(proposals))
         return targets, start, seeds, proposals, box, radius, bool(recheck) or self.challenger is not None
 
     def _hold_facing(self, result: PsoResult) -> np.ndarray:
