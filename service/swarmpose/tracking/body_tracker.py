@@ -8,7 +8,7 @@ Per frame (:meth:`BodyTracker.step`):
 2. **Start**. With a previous solution (state *tracking*), particles start around it in a
    region that contains J^e (:mod:`swarmpose.tracking.search`); the last 5 solutions and
    the J^e torso pose are injected as particles, and so are the previous solution's limbs
-   mirrored along the line of sight and its left and right legs, and arms, exchanged
+   mirrored along the line of sight and, side on, its left and right legs, and arms, exchanged
    (:mod:`swarmpose.tracking.limb_flips`, :mod:`swarmpose.tracking.limb_exchanges`, ``limb_flips``),
    and its arms sent to depth within reach that its body does not explain and to each other's
    mirror image (:mod:`swarmpose.tracking.arm_proposals`, ``arm_proposals``); searched by the

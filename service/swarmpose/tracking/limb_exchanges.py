@@ -7,16 +7,15 @@ cannot tell the two apart (the same surfaces are covered), and the joint term's 
 exchanged fit holds for as long as the legs stay apart. Undoing it moves both legs at once, a jump
 the per-frame search (a fraction of a radian around the last pose) does not make.
 
-So each frame on which the previous solution stands side on (:data:`SIDE_ON_SHARE`), its legs, and its
-arms, are exchanged: each limb's middle and end
-points are sent to where the other side's limb has them relative to its pivot, mirrored through the
-body's midplane (the plane across the line between the two pivots) and set at its own pivot. The
-stride and the arms' swing change sides, each limb stays on its own side of the body, and a pose
-whose two sides are alike (standing, arms held out) gives itself back. Each limb's four angles are
-solved to them
+So each frame on which the previous solution stands side on (:data:`SIDE_ON_SHARE`), its legs, and
+its arms, are exchanged: each limb's middle and end points are sent to where the other side's limb has
+them relative to its pivot, mirrored through the body's midplane (the plane across the line between
+the two pivots) and set at its own pivot. The stride and the arms' swing change sides, each limb stays
+on its own side of the body, and a pose whose two sides are alike (standing, arms held out) gives
+itself back. Each limb's four angles are solved to them
 (:func:`~swarmpose.tracking.limb_flips.solve_limbs`) from the other side's angles mirrored
-(:data:`MIRROR_SIGNS`). Each exchanged pose joins the frame's swarm as a
-particle; the objective decides, as it does for the depth flips.
+(:data:`MIRROR_SIGNS`). Each exchanged pose joins the frame's swarm as a particle; the objective
+decides, as it does for the depth flips.
 """
 
 from __future__ import annotations
@@ -36,9 +35,8 @@ EXCHANGED_PAIRS: tuple[tuple[tuple[str, str, str], tuple[str, str, str]], ...] =
 SIDE_ON_SHARE = 0.7
 """Exchanges are tried only for a pose at least this side on (:func:`~swarmpose.tracking.objective.side_on_share`,
 0.7: within 45° of side on), where the two sides' limbs cover each other in the image. Facing the
-camera or turned away, the limbs lie apart and a network's labels, not the limbs, are what swaps
-(from behind most of all): tried on every frame, the exchanges followed those swaps, and the back
-views and UTD-MHAD lost what the side views gained (BENCHMARKS.md, issue 53, limbs exchanged)."""
+camera or turned away, the limbs lie apart, and what swaps there is a network's labels (from behind
+most of all), which an exchange would follow (BENCHMARKS.md, issue 53, "Limbs exchanged")."""
 MIRROR_SIGNS = (np.array([-1.0, 1.0, -1.0, 1.0]), np.array([-1.0, 1.0, -1.0, -1.0]))
 """Per pair of :data:`EXCHANGED_PAIRS`, the signs that turn one side's four angles (pivot's three, the
 middle joint's one; :func:`~swarmpose.tracking.limb_flips.limb_columns`) into the other side's mirror
