@@ -88,7 +88,8 @@ def test_with_poses_of_its_own_the_true_shape_beats_the_shape_the_poses_were_tra
     true_x, wrong_x = PRESET_MACROS["female"].vector(), PRESET_MACROS[wrong].vector()
     source = FolderSource(female_walk)
     detector = SimulatedDetector(load_ground_truth(female_walk))
-    config = replace(TrackerConfig(), particles=24, generations=24, coarse_share=0.0, limb_flips=False, polish=0)
+    config = replace(TrackerConfig(), particles=24, generations=24, coarse_share=0.0, limb_flips=False,
+                     limb_exchanges=False, polish=0)
     context = ClContext.for_spec(config.device)
     tracker = BodyTracker(space.tracking_body(wrong_x), source.intrinsics, replace(config, polish=60), context)
     samples = []

@@ -19,8 +19,8 @@ TRACKER_DEFAULTS = {**{name: getattr(TrackerConfig(), name) for name in BENCH_SE
 """The tracker settings every record stores, so that a resume compares them even when the
 caller left them at their defaults (``bench utdmhad`` adds ``auto_height``, which the matrix's
 given shapes never use). The matrix's cells hold one person each, so its ``max_people`` is 1."""
-BEFORE_THE_SETTING = {**TRACKER_DEFAULTS, "limb_flips": False, "hidden_lifts": False, "arm_proposals": False,
-                      "hypotheses": 0, "polish": 0, "auto_height": False, "lag_frames": 0.0,
+BEFORE_THE_SETTING = {**TRACKER_DEFAULTS, "limb_flips": False, "limb_exchanges": False, "hidden_lifts": False,
+                      "arm_proposals": False, "hypotheses": 0, "polish": 0, "auto_height": False, "lag_frames": 0.0,
                       "box_hold": 0.0, "search": "swarm"}
 """What a record that lacks a setting was made with: the tracker's behaviour before the setting
 existed (its default then, or, for a new behaviour that is on by default now, off); UTD-MHAD

@@ -258,7 +258,8 @@ def fit_shape(space: ShapeSpace, samples: Sequence[ShapeSample], intrinsics: Int
                                    "the whole body is seen")
     if config.mode == "lift":
         raise PersonalisationError("the lift mode fits no body; personalise with mode hybrid, depth or joints")
-    config = replace(config, max_people=1, coarse_share=0.0, limb_flips=False, polish=0)  # the pose step: local
+    config = replace(config, max_people=1, coarse_share=0.0, limb_flips=False, limb_exchanges=False,
+                     polish=0)  # the pose step: local
     context = context or ClContext.for_spec(config.device)
     x = space.start
     body = space.fitting_body(x)

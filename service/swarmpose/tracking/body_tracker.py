@@ -9,7 +9,7 @@ Per frame (:meth:`BodyTracker.step`):
    region that contains J^e (:mod:`swarmpose.tracking.search`); the last 5 solutions and
    the J^e torso pose are injected as particles, and so are the previous solution's limbs
    mirrored along the line of sight and, side on, its left and right legs, and arms, exchanged
-   (:mod:`swarmpose.tracking.limb_flips`, :mod:`swarmpose.tracking.limb_exchanges`, ``limb_flips``),
+   (:mod:`swarmpose.tracking.limb_flips`, ``limb_flips``; :mod:`swarmpose.tracking.limb_exchanges`, ``limb_exchanges``),
    and its arms sent to depth within reach that its body does not explain and to each other's
    mirror image (:mod:`swarmpose.tracking.arm_proposals`, ``arm_proposals``); searched by the
    whole-pose swarm, the best ``hypotheses`` of these flips and proposals each with a sub-swarm that
@@ -335,10 +335,13 @@ class BodyTracker:
             with timed(timings, "arms"):
                 proposals += arm_proposals(self.body, centre, depth, self.intrinsics, box, scene)[:room]
             room = pso.particles - len(seeds) - len(proposals)
-        if self.config.limb_flips and room > 0 and not lean:
+        if self.config.limb_exchanges and room > 0 and not lean:
             with timed(timings, "flips"):
                 proposals += limb_exchanges(self.body, centre)[:room]
-                proposals += limb_flips(self.body, centre, most=pso.particles - len(seeds) - len(proposals))
+            room = pso.particles - len(seeds) - len(proposals)
+        if self.config.limb_flips and room > 0 and not lean:
+            with timed(timings, "flips"):
+                proposals += limb_flips(self.body, centre, most=room)
         return targets, start, seeds, proposals, box, radius, bool(recheck) or self.challenger is not None
 
     def _hold_facing(self, result: PsoResult) -> np.ndarray:

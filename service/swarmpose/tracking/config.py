@@ -80,11 +80,11 @@ class TrackerConfig:
     arm_prior: float = setting(0.0, "w_A: cost per rad² of the arms away from rest, times how side-on the person "
                                     "stands (0 = off)", minimum=0.0)
     """1 holds the arms a side view hides."""
-    limb_flips: bool = setting(True, "each limb of the last pose flipped in depth, and side on its left "
-                                     "and right limbs exchanged, join the swarm")
-    """Same image, other depth: one particle per limb, every frame; and for a track that stands side on,
-    the legs', and the arms', swings exchanged left for right (:mod:`swarmpose.tracking.limb_exchanges`),
-    one particle per pair."""
+    limb_flips: bool = setting(True, "each limb of the last pose mirrored along the line of sight joins the swarm")
+    """Same image, other depth: one particle per limb, every frame."""
+    limb_exchanges: bool = setting(True, "side on, the last pose with its legs', and its arms', swings exchanged "
+                                         "left for right joins the swarm")
+    """For a track within 45° of side on, one particle per pair (:mod:`swarmpose.tracking.limb_exchanges`)."""
     arm_proposals: bool = setting(True, "each arm sent to unexplained depth within its reach joins the swarm")
     """Every frame, each arm of the last solution is sent to observed depth within its reach that the
     body does not explain, and to the other arm's mirror image; each such pose is a particle."""
