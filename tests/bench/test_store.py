@@ -18,16 +18,16 @@ def test_a_record_is_read_back_only_with_its_own_settings(tmp_path):
 
 
 def test_a_record_made_before_a_setting_existed_reads_as_what_the_tracker_did_then(tmp_path):
-    """Records written before arm_prior, limb_flips, hidden_lifts, arm_proposals, hypotheses, polish,
-    box_hold and search existed lack them: they were made with the prior off (0, still its default),
-    without flips, with every lift in the 3D term, without arm proposals, sub-swarms or polish, with
+    """Records written before arm_prior, limb_flips, limb_exchanges, hidden_lifts, arm_proposals, hypotheses,
+    polish, box_hold and search existed lack them: they were made with the prior off (0, still its default),
+    without flips or exchanges, with every lift in the 3D term, without arm proposals, sub-swarms or polish, with
     the detector's box following the joints every frame and with the whole-pose swarm at 64
     generations (``search`` auto offline), so they resume a run with those off, and neither the
     default run nor one with the prior on or block by block."""
     path = tmp_path / "old.json"
     write_record(path, {"mpjpe_mm": 50.0, "particles": 64, "generations": 64, "max_people": 1})
-    then = {"limb_flips": False, "hidden_lifts": False, "arm_proposals": False, "hypotheses": 0, "polish": 0,
-            "box_hold": 0.0, "search": "auto", "generations": 64}
+    then = {"limb_flips": False, "limb_exchanges": False, "hidden_lifts": False, "arm_proposals": False,
+            "hypotheses": 0, "polish": 0, "box_hold": 0.0, "search": "auto", "generations": 64}
     assert read_record(path, tracker_settings(then))["mpjpe_mm"] == 50.0
     assert read_record(path, tracker_settings(None)) is None, "the default run has flips"
     assert read_record(path, tracker_settings({"limb_flips": False})) is None, "and drops hidden lifts"
@@ -50,6 +50,17 @@ def test_a_record_made_without_flips_does_not_resume_a_default_run(tmp_path):
     write_record(path, {"mpjpe_mm": 61.0, **tracker_settings({"limb_flips": False})})
     assert read_record(path, tracker_settings(None)) is None
     assert read_record(path, tracker_settings({"limb_flips": False}))["mpjpe_mm"] == 61.0
+
+
+def test_a_record_made_before_the_limb_exchanges_resumes_only_a_run_without_them(tmp_path):
+    """The exchanges came after the flips: a record with the flips but no ``limb_exchanges`` key was made
+    without them, so it does not resume a default run (exchanges on), only one that turns them off."""
+    path = tmp_path / "cell.json"
+    made = tracker_settings(None)
+    del made["limb_exchanges"]
+    write_record(path, {"mpjpe_mm": 41.6, **made})
+    assert read_record(path, tracker_settings(None)) is None
+    assert read_record(path, tracker_settings({"limb_exchanges": False}))["mpjpe_mm"] == 41.6
 
 
 def test_utdmhad_records_carry_the_automatic_height_only_where_it_acts(tmp_path):

@@ -12,8 +12,8 @@ from pathlib import Path
 
 from swarmpose.tracking.config import TrackerConfig
 
-BENCH_SETTINGS = ("particles", "generations", "search", "arm_prior", "limb_flips", "hidden_lifts", "arm_proposals",
-                  "hypotheses", "backward", "polish", "smoothing", "ensemble", "box_hold")
+BENCH_SETTINGS = ("particles", "generations", "search", "arm_prior", "limb_flips", "limb_exchanges", "hidden_lifts",
+                  "arm_proposals", "hypotheses", "backward", "polish", "smoothing", "ensemble", "box_hold")
 """The tracker settings the resumable benchmarks take as flags (their defaults: :class:`TrackerConfig`'s)."""
 TRACKER_DEFAULTS = {**{name: getattr(TrackerConfig(), name) for name in BENCH_SETTINGS}, "max_people": 1}
 """The tracker settings every record stores, so that a resume compares them even when the
