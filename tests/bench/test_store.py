@@ -27,7 +27,7 @@ def test_a_record_made_before_a_setting_existed_reads_as_what_the_tracker_did_th
     path = tmp_path / "old.json"
     write_record(path, {"mpjpe_mm": 50.0, "particles": 64, "generations": 64, "max_people": 1})
     then = {"limb_flips": False, "limb_exchanges": False, "hidden_lifts": False, "arm_proposals": False,
-            "hypotheses": 0, "polish": 0, "box_hold": 0.0, "search": "auto", "generations": 64}
+            "hypotheses": 0, "polish": 0, "box_hold": 0.0, "search": "auto", "generations": 64, "turning_swarm": 0.0}
     assert read_record(path, tracker_settings(then))["mpjpe_mm"] == 50.0
     assert read_record(path, tracker_settings(None)) is None, "the default run has flips"
     assert read_record(path, tracker_settings({"limb_flips": False})) is None, "and drops hidden lifts"

@@ -281,14 +281,15 @@ def test_a_live_tracked_frame_searches_block_by_block_and_an_offline_one_with_th
     after its first generations (:mod:`swarmpose.tracking.block_pso`), except where re-checked facings
     compete (a young track's frames 1, 2 and 4) and at the start; offline every search is the
     whole-pose swarm's, as with ``search`` swarm; ``search`` blocks searches block by block offline
-    too. Each follows the walker (31-32 mm measured)."""
+    too (``turning_swarm`` off: a fast turn offline searches with the whole swarm). Each follows the
+    walker (31-32 mm measured)."""
     import swarmpose.tracking.block_pso as block_pso
     import swarmpose.tracking.body_tracker as body_tracker
 
     intr = Intrinsics.load(sequence / "intrinsic.json")
     for search, budget_ms, by_blocks in (("auto", 60.0, True), ("auto", 0.0, False), ("blocks", 0.0, True),
                                          ("swarm", 60.0, False)):
-        tracker = BodyTracker(body, intr, TrackerConfig(particles=24, generations=8, search=search))
+        tracker = BodyTracker(body, intr, TrackerConfig(particles=24, generations=8, search=search, turning_swarm=0))
         tracker.budget_ms, tracker.frame_period_s = budget_ms, 1 / 15
         seen, ran = searched_by_blocks(tracker), []
         monkeypatch.setattr(body_tracker, "whole_then_blocks",

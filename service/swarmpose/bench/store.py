@@ -12,8 +12,9 @@ from pathlib import Path
 
 from swarmpose.tracking.config import TrackerConfig
 
-BENCH_SETTINGS = ("particles", "generations", "search", "arm_prior", "limb_flips", "limb_exchanges", "hidden_lifts",
-                  "arm_proposals", "hypotheses", "backward", "polish", "smoothing", "ensemble", "box_hold")
+BENCH_SETTINGS = ("particles", "generations", "search", "turning_swarm", "arm_prior", "limb_flips", "limb_exchanges",
+                  "hidden_lifts", "arm_proposals", "hypotheses", "backward", "polish", "smoothing", "ensemble",
+                  "box_hold")
 """The tracker settings the resumable benchmarks take as flags (their defaults: :class:`TrackerConfig`'s)."""
 TRACKER_DEFAULTS = {**{name: getattr(TrackerConfig(), name) for name in BENCH_SETTINGS}, "max_people": 1}
 """The tracker settings every record stores, so that a resume compares them even when the
@@ -21,11 +22,12 @@ caller left them at their defaults (``bench utdmhad`` adds ``auto_height``, whic
 given shapes never use). The matrix's cells hold one person each, so its ``max_people`` is 1."""
 BEFORE_THE_SETTING = {**TRACKER_DEFAULTS, "limb_flips": False, "limb_exchanges": False, "hidden_lifts": False,
                       "arm_proposals": False, "hypotheses": 0, "polish": 0, "auto_height": False, "lag_frames": 0.0,
-                      "box_hold": 0.0, "search": "swarm"}
+                      "box_hold": 0.0, "search": "swarm", "turning_swarm": 0.0}
 """What a record that lacks a setting was made with: the tracker's behaviour before the setting
 existed (its default then, or, for a new behaviour that is on by default now, off); UTD-MHAD
 records without ``lag_frames`` were scored against the files' own pairing of skeleton and depth;
-records without ``search`` were made by the whole-pose swarm."""
+records without ``search`` were made by the whole-pose swarm, those without ``turning_swarm`` searched
+a turning track's frames as any other."""
 OFFLINE_SEARCH = {"auto": "swarm"}
 """The search a ``search`` setting runs in these benchmarks, which have no frame budget: auto is the swarm."""
 

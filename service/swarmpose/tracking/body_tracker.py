@@ -379,7 +379,11 @@ class BodyTracker:
         return lost_body(reason, self.body_id, {"total": 1000 * (time.perf_counter() - t0)}, joints)
 
     def searches_by_blocks(self) -> bool:
-        """Whether a tracked frame searches block by block (``search``: blocks, or auto with a frame budget)."""
+        """Whether a tracked frame searches block by block: ``search`` blocks, or auto with a frame budget;
+        offline not while the track turns faster than ``turning_swarm`` deg/s (see there)."""
+        rate = self.history.turn_rate_deg_s() if self.budget_ms <= 0 and self.config.turning_swarm > 0 else None
+        if rate is not None and rate > self.config.turning_swarm:
+            return False
         return self.config.search == "blocks" or (self.config.search == "auto" and self.budget_ms > 0)
 
     def pso_search(self, objective: Objective, start: np.ndarray, rng: np.random.Generator, pso: PsoConfig,

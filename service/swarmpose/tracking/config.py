@@ -37,10 +37,15 @@ class TrackerConfig:
     pso: str = setting("perturbed", "PSO variant", choices=VARIANTS)
     search: str = setting("blocks", "tracked frames: blocks (a particle moves one limb of a shared pose), swarm ("
                                     "the paper), auto (blocks live)", choices=SEARCHES)
-    """Every tracked frame block by block (``generations`` 32; docs/tracking.md says why); swarm with
-    ``generations`` 64 is the paper's search. A track's start and frames where other facings
-    compete search with the whole-pose swarm either way. The PSO variant's perturbation and the
-    sub-swarms (``hypotheses``) are the whole-pose swarm's."""
+    """Every tracked frame block by block (``generations`` 32; docs/tracking.md says why), offline but a
+    fast-turning track's (``turning_swarm``); swarm with ``generations`` 64 is the paper's search. A
+    track's start and frames where other facings compete search with the whole-pose swarm either way.
+    The PSO variant's perturbation and the sub-swarms (``hypotheses``) are the whole-pose swarm's."""
+    turning_swarm: float = setting(90.0, "offline, a track turning faster than this (deg/s) searches its frame with "
+                                         "the whole-pose swarm (0 = never)", minimum=0)
+    """Block by block, the limbs' sub-swarms follow a body that turns badly (each is judged in the
+    shared pose, which the turn moves); the rate is the root's turn between the track's last two poses.
+    Live frames keep the blocks: at a live frame's few generations the whole swarm loses more."""
     depth_weight: float | None = setting(None, "w_D (auto: the mode's)", kind="float?", minimum=0)
     joints_weight: float | None = setting(None, "w_J (auto: the mode's)", kind="float?", minimum=0)
     tile: tuple[int, int] = setting((64, 64), "depth tile WxH pixels over the person's box", kind="size")

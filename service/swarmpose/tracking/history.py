@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from swarmpose.body.kinematics import root_turn_deg
 from swarmpose.tracking.search import predicted_pose
 
 HISTORY = 5
@@ -49,6 +50,13 @@ class TrackHistory:
         if not period_s or not self.times_ns:
             return 1.0
         return max((time_ns - self.times_ns[-1]) * 1e-9 / period_s, 1.0)
+
+    def turn_rate_deg_s(self) -> float | None:
+        """How fast the root turned (deg/s, about any axis) from the second newest pose to the newest; None
+        with fewer than two poses or no time between them."""
+        if len(self.poses) < 2 or self.times_ns[-1] <= self.times_ns[-2]:
+            return None
+        return float(root_turn_deg(self.poses[-2], self.poses[-1])) / ((self.times_ns[-1] - self.times_ns[-2]) * 1e-9)
 
     def predicted(self, time_ns: int, periods: float) -> list[np.ndarray]:
         """After dropped frames (``periods`` > :data:`DROPPED`): the pose the last two poses' motion leads
