@@ -40,7 +40,7 @@ def test_the_turn_rate_is_the_roots_turn_over_the_time_between_the_last_two_pose
     assert history.turn_rate_deg_s() == pytest.approx(120.0, rel=1e-6)
     history.add(turned(facing, 12.0), 1_100_000_000)
     assert history.turn_rate_deg_s() is None, "no time between them"
-    history.add(turned(facing, 9.0), 1_150_000_000)  # back by 3 degrees in 0.05 s, about any axis
+    history.add(turned(facing, 9.0), 1_150_000_000)  # back by 3 degrees in 0.05 s: a rate, whatever the direction
     assert history.turn_rate_deg_s() == pytest.approx(60.0, rel=1e-6)
 
 
