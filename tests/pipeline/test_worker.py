@@ -133,7 +133,9 @@ def test_live_keeps_the_newest_frame_and_counts_the_dropped(wave_sequence, body)
 
 def test_live_reads_only_the_frames_it_tracks(wave_sequence, body, monkeypatch):
     """Served at its rate, a folder's frames are decoded when detection takes them, not when they are
-    dropped on the way there: fewer depth images read than frames served, at least one per published."""
+    dropped on the way there: fewer depth images read than frames served, at least one per published;
+    the published frames carry the source's own numbers, in order (which ones survive the pacing
+    depends on the machine's load: under load even frame 0 can be dropped)."""
     import swarmpose.sources.folder as folder
 
     reads = []
@@ -142,8 +144,9 @@ def test_live_reads_only_the_frames_it_tracks(wave_sequence, body, monkeypatch):
     sink = Collect()
     stats = make_worker(wave_sequence, body, [sink], SMALL, drop_stale=True, pace_fps=200.0).run()
     assert stats.dropped > 0 and stats.published <= len(reads) < stats.received
-    direct = next(iter(open_source(f"folder:{wave_sequence}")))
-    assert sink.frames[0]["frame"] == direct.index == 0
+    numbers = [frame.index for frame in open_source(f"folder:{wave_sequence}")]
+    published = [m["frame"] for m in sink.frames]
+    assert published == sorted(set(published)) and set(published) <= set(numbers), (published, numbers)
 
 
 class FlakyDetector:
