@@ -381,10 +381,11 @@ class BodyTracker:
     def searches_by_blocks(self) -> bool:
         """Whether a tracked frame searches block by block: ``search`` blocks, or auto with a frame budget;
         offline not while the track turns faster than ``turning_swarm`` deg/s (see there)."""
-        rate = self.history.turn_rate_deg_s() if self.budget_ms <= 0 and self.config.turning_swarm > 0 else None
-        if rate is not None and rate > self.config.turning_swarm:
-            return False
-        return self.config.search == "blocks" or (self.config.search == "auto" and self.budget_ms > 0)
+        blocks = self.config.search == "blocks" or (self.config.search == "auto" and self.budget_ms > 0)
+        if not blocks or self.budget_ms > 0 or self.config.turning_swarm <= 0:
+            return blocks
+        rate = self.history.turn_rate_deg_s()
+        return rate is None or rate <= self.config.turning_swarm
 
     def pso_search(self, objective: Objective, start: np.ndarray, rng: np.random.Generator, pso: PsoConfig,
                    groups: np.ndarray | None = None, blocks: bool = False,
