@@ -338,10 +338,11 @@ def test_a_detector_error_type_from_the_project_is_reported_the_same(wave_sequen
     assert all(m["bodies"][0]["state"] == "lost" for m in sink.frames)   # lift mode: no joints, no answer
 
 
-def test_serving_a_recording_without_a_rate_warns_and_assumes_30_fps(wave_sequence, tmp_path, caplog):
+def test_serving_a_recording_without_a_rate_warns_and_assumes_30_fps_and_its_budget(wave_sequence, tmp_path, caplog):
     import json
     import shutil
     from contextlib import ExitStack
+    from dataclasses import replace
 
     from swarmpose.pipeline.config import ServiceConfig, ZenohConfig
     from swarmpose.pipeline.service import build_worker
@@ -359,7 +360,11 @@ def test_serving_a_recording_without_a_rate_warns_and_assumes_30_fps(wave_sequen
         with ExitStack() as stack:
             worker, parts, _ = build_worker(config, stack, replay=False)
             assert worker.pace_fps == 30.0 and parts.pipeline.frame_period_s == 1 / 30
+            assert parts.pipeline.budget_ms == pytest.approx(30.0), "auto: 0.9 of the 33.3 ms period"
         assert ("records no frame rate" in caplog.text) == warned
+    with ExitStack() as stack:
+        _, parts, _ = build_worker(replace(config, frame_budget_ms=45.0), stack, replay=False)
+        assert parts.pipeline.budget_ms == 45.0
 
 
 @pytest.mark.slow

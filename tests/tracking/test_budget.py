@@ -36,3 +36,11 @@ def test_lean_frames_and_the_start_only_with_a_budget():
     assert start_budget(64, 0.0, 64, 64) == (64, 64) and start_budget(64, 0.0, 32, 128) == (64, 128)
     least = int(64 * START_SHARE)  # live: the share of start_budget, whatever the frame's search runs
     assert start_budget(64, 100.0, 64, 64) == (least, least) and start_budget(64, 100.0, 128, 128) == (least, least)
+
+
+def test_the_live_budget_on_auto_is_nine_tenths_of_the_cameras_frame_period():
+    from swarmpose.tracking.budget import live_budget_ms
+
+    assert abs(live_budget_ms(None, 1 / 30) - 30.0) < 1e-9  # 0.9 x 33.3 ms
+    assert abs(live_budget_ms(None, 1 / 15) - 60.0) < 1e-9
+    assert live_budget_ms(45.0, 1 / 30) == 45.0 and live_budget_ms(0.0, 1 / 30) == 0.0  # set: as set

@@ -241,11 +241,12 @@ def serve_startup_s(config: ServiceConfig, cache: Path, timeout_s: float = START
     with tempfile.TemporaryDirectory(prefix="swarmpose-bench-live-") as tmp:
         record = Path(tmp) / "record"
         t = config.tracker
+        budget = "auto" if config.frame_budget_ms is None else str(config.frame_budget_ms)
         argv = [sys.executable, "-m", "swarmpose", "serve", config.source, "--zenoh-mode", "off", "--record",
                 str(record), "--no-overlay", "--no-ros-bag", "--body", config.body, "--detector", config.detector,
                 "--quiet",
                 "--particles", str(t.particles), "--generations", str(t.generations), "--max-people",
-                str(t.max_people), "--frame-budget-ms", str(config.frame_budget_ms), "--rate", str(config.rate)]
+                str(t.max_people), "--frame-budget-ms", budget, "--rate", str(config.rate)]
         argv += ["--shape", config.shape] if config.shape else []
         argv += ["--models", config.models] if config.models else []
         env = {**os.environ, "XDG_CACHE_HOME": str(cache), "POCL_CACHE_DIR": str(cache / "pocl"),

@@ -80,10 +80,11 @@ class ServiceConfig:
                                "fast as possible)", minimum=0.0)
     """Live cameras set their own rate."""
     loop: bool = setting(False, "start a recording over when it ends (serve)")
-    frame_budget_ms: float = setting(60.0, "serve: the time a frame's tracking may take, ms (0: the full search "
-                                            "every frame)", minimum=0.0)
+    frame_budget_ms: float | None = setting(None, "serve: the time a frame's tracking may take, ms (auto: 0.9 "
+                                                   "camera frame periods; 0: the full search)", kind="float?",
+                                            minimum=0.0)
     """Each frame's search and polish are sized to it (shared by the people in view), so the poses
-    keep up with the camera (:mod:`swarmpose.tracking.budget`)."""
+    keep up with the camera (:mod:`swarmpose.tracking.budget`, :func:`~swarmpose.tracking.budget.live_budget_ms`)."""
     record: str = setting("", "serve: also write poses.jsonl/csv/bvh and overlay.mp4 into this folder",
                           everyday=True)
     status_period_s: float = setting(1.0, "seconds between status messages", minimum=0.01)

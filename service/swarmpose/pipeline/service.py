@@ -38,6 +38,7 @@ from swarmpose.publish.zenoh_link import ZenohSink
 from swarmpose.sim.scoring import ScoreSink
 from swarmpose.sources.base import DeferredFrame, Frame, FrameSource, SkippedFrame
 from swarmpose.sources.registry import open_source
+from swarmpose.tracking.budget import live_budget_ms
 
 if TYPE_CHECKING:
     from swarmpose.pipeline.ensemble import EnsemblePipeline
@@ -212,7 +213,7 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
                         "it at %g frames/s, its frames stamped so; pass --rate to serve it at another", config.source,
                         parts.fps)
         parts.pipeline.frame_period_s = 1.0 / parts.fps  # live: keep up with the camera
-        parts.pipeline.budget_ms = config.frame_budget_ms
+        parts.pipeline.budget_ms = live_budget_ms(config.frame_budget_ms, parts.pipeline.frame_period_s)
     uri = config.source
     worker = Worker(lambda: open_source(uri), parts.pipeline, sinks, camera=config.camera_id, drop_stale=not replay,
                     pace_fps=pace, loop=config.loop and not replay, frames=config.frames,

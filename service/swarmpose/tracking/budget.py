@@ -33,6 +33,10 @@ LIVE_START_GENERATIONS = 16
 """With a budget, a track's start runs its swarm for at most this many generations after the facings' fits."""
 LIVE_START_POLISH = 8
 """With a budget, a track's start polishes for at most this many rounds."""
+AUTO_PERIOD_SHARE = 0.9
+"""With the frame budget on auto, a live frame's tracking may take this share of the camera's frame period (30
+ms at 30 frames/s): the tracker then takes nearly every frame, and a client's pose is fresher than with a longer
+search of every other frame, as accurate."""
 START_SHARE = 0.5
 """With a budget, a track's start runs this share of ``start_budget`` particles and generations each
 (a quarter of the scored poses): a lost track's restart holds up every frame behind it."""
@@ -81,6 +85,12 @@ class FrameBudget:
 def running_mean(old: float | None, new: float, weight: float = SMOOTHING) -> float:
     """``new`` folded into the running mean ``old`` with ``weight`` (``new`` itself when there is none)."""
     return new if old is None else old + weight * (new - old)
+
+
+def live_budget_ms(configured: float | None, frame_period_s: float) -> float:
+    """A live frame's budget (ms): ``configured`` (``frame_budget_ms``; 0: the full search), or on auto (None)
+    :data:`AUTO_PERIOD_SHARE` of the camera's ``frame_period_s``."""
+    return AUTO_PERIOD_SHARE * 1000.0 * frame_period_s if configured is None else float(configured)
 
 
 def lean_frame(budget_ms: float, generations: int) -> bool:
