@@ -365,6 +365,9 @@ def test_serving_a_recording_without_a_rate_warns_and_assumes_30_fps_and_its_bud
     with ExitStack() as stack:
         _, parts, _ = build_worker(replace(config, frame_budget_ms=45.0), stack, replay=False)
         assert parts.pipeline.budget_ms == 45.0
+    with ExitStack() as stack:  # served at 10 frames/s: 0.9 of the 100 ms between the frames that come
+        _, parts, _ = build_worker(replace(config, rate=10.0), stack, replay=False)
+        assert parts.pipeline.budget_ms == pytest.approx(90.0) and parts.pipeline.frame_period_s == 1 / 30
 
 
 @pytest.mark.slow

@@ -213,7 +213,7 @@ def build_worker(config: ServiceConfig, stack: ExitStack, *, replay: bool, out: 
                         "it at %g frames/s, its frames stamped so; pass --rate to serve it at another", config.source,
                         parts.fps)
         parts.pipeline.frame_period_s = 1.0 / parts.fps  # live: keep up with the camera
-        parts.pipeline.budget_ms = live_budget_ms(config.frame_budget_ms, parts.pipeline.frame_period_s)
+        parts.pipeline.budget_ms = live_budget_ms(config.frame_budget_ms, 1.0 / (pace or parts.fps))  # as frames come
     uri = config.source
     worker = Worker(lambda: open_source(uri), parts.pipeline, sinks, camera=config.camera_id, drop_stale=not replay,
                     pace_fps=pace, loop=config.loop and not replay, frames=config.frames,

@@ -89,7 +89,7 @@ def running_mean(old: float | None, new: float, weight: float = SMOOTHING) -> fl
 
 def live_budget_ms(configured: float | None, frame_period_s: float) -> float:
     """A live frame's budget (ms): ``configured`` (``frame_budget_ms``; 0: the full search), or on auto (None)
-    :data:`AUTO_PERIOD_SHARE` of the camera's ``frame_period_s``."""
+    :data:`AUTO_PERIOD_SHARE` of ``frame_period_s``, the time between the frames that come (s)."""
     return AUTO_PERIOD_SHARE * 1000.0 * frame_period_s if configured is None else float(configured)
 
 
