@@ -263,6 +263,25 @@ def test_a_short_live_frame_seeds_the_limbs_at_their_lifts_and_an_offline_one_do
         assert [("lifted" in r.timings_ms) for r in results[1:]] == [seeded] * (FRAMES - 1)
 
 
+def test_a_live_frame_is_seeded_where_the_motion_leads_and_an_offline_one_only_after_dropped_frames(body, sequence):
+    """Every frame of the sequence (15 fps), one camera period apart: live (a frame budget) each tracked
+    frame after the second gets the last two poses' prediction as a seed; offline none does."""
+    intr = Intrinsics.load(sequence / "intrinsic.json")
+    for budget_ms, seeded in ((60.0, True), (0.0, False)):
+        tracker = BodyTracker(body, intr, TrackerConfig(particles=24, generations=8))
+        tracker.budget_ms, tracker.frame_period_s = budget_ms, 1 / 15
+        seeds, real = [], tracker.history.predicted
+
+        def predicted(time_ns, periods, every_step=False, seeds=seeds, real=real):
+            seeds.append(real(time_ns, periods, every_step))
+            return seeds[-1]
+
+        tracker.history.predicted = predicted
+        results = [tracker.step(frame, det) for frame, det in frames_of(sequence)]
+        assert all(r.state != "lost" for r in results)
+        assert [len(s) for s in seeds[1:]] == [int(seeded)] * (len(seeds) - 1), budget_ms
+
+
 def searched_by_blocks(tracker: BodyTracker) -> list[bool]:
     """The ``blocks`` argument of each of ``tracker``'s searches, recorded as they run."""
     seen, real = [], tracker.pso_search

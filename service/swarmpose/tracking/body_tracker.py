@@ -323,7 +323,7 @@ class BodyTracker:
         radius = search.angle_radius(self.body, self.intrinsics, centre, targets)
         ahead = self.history.periods_since(frame.timestamp_ns, self.frame_period_s)  # > 1: frames dropped
         start = search.spread(centre, pso.particles, rng, 0.04 * np.sqrt(ahead) + offset, 0.15, radius)
-        predicted = self.history.predicted(frame.timestamp_ns, ahead)
+        predicted = self.history.predicted(frame.timestamp_ns, ahead, every_step=self.budget_ms > 0)
         seeds = ([centre] + predicted + ([self.challenger] if self.challenger is not None else [])
                  + self.history.newest_first() + ([torso] if torso is not None else []) + recheck)
         if lean and self.config.mode != "depth":  # live, a short search: the limbs sent to their lifts

@@ -58,10 +58,12 @@ class TrackHistory:
             return None
         return float(root_turn_deg(self.poses[-2], self.poses[-1])) / ((self.times_ns[-1] - self.times_ns[-2]) * 1e-9)
 
-    def predicted(self, time_ns: int, periods: float) -> list[np.ndarray]:
-        """After dropped frames (``periods`` > :data:`DROPPED`): the pose the last two poses' motion leads
-        to at ``time_ns`` (:func:`~swarmpose.tracking.search.predicted_pose`), as a seed; else none."""
-        if periods <= DROPPED or len(self.poses) < 2:
+    def predicted(self, time_ns: int, periods: float, every_step: bool = False) -> list[np.ndarray]:
+        """After dropped frames (``periods`` > :data:`DROPPED`), or after any step with ``every_step`` (a
+        live frame, whose short search starts nearer where the body goes): the pose the last two poses'
+        motion leads to at ``time_ns`` (:func:`~swarmpose.tracking.search.predicted_pose`), as a seed;
+        else none."""
+        if (periods <= DROPPED and not every_step) or len(self.poses) < 2:
             return []
         step_s = (self.times_ns[-1] - self.times_ns[-2]) * 1e-9
         return [predicted_pose(self.poses[-1], self.poses[-2], step_s, (time_ns - self.times_ns[-1]) * 1e-9)]
