@@ -51,19 +51,24 @@ class TrackHistory:
             return 1.0
         return max((time_ns - self.times_ns[-1]) * 1e-9 / period_s, 1.0)
 
+    def last_step_s(self) -> float | None:
+        """Seconds from the second newest pose to the newest; None with fewer than two poses."""
+        return (self.times_ns[-1] - self.times_ns[-2]) * 1e-9 if len(self.poses) >= 2 else None
+
     def turn_rate_deg_s(self) -> float | None:
         """How fast the root turned (deg/s, about any axis) from the second newest pose to the newest; None
         with fewer than two poses or no time between them."""
-        if len(self.poses) < 2 or self.times_ns[-1] <= self.times_ns[-2]:
+        step_s = self.last_step_s()
+        if not step_s or step_s <= 0:
             return None
-        return float(root_turn_deg(self.poses[-2], self.poses[-1])) / ((self.times_ns[-1] - self.times_ns[-2]) * 1e-9)
+        return float(root_turn_deg(self.poses[-2], self.poses[-1])) / step_s
 
     def predicted(self, time_ns: int, periods: float, every_step: bool = False) -> list[np.ndarray]:
         """After dropped frames (``periods`` > :data:`DROPPED`), or after any step with ``every_step`` (a
         live frame, whose short search starts nearer where the body goes): the pose the last two poses'
         motion leads to at ``time_ns`` (:func:`~swarmpose.tracking.search.predicted_pose`), as a seed;
         else none."""
-        if (periods <= DROPPED and not every_step) or len(self.poses) < 2:
+        step_s = self.last_step_s()
+        if (periods <= DROPPED and not every_step) or step_s is None:
             return []
-        step_s = (self.times_ns[-1] - self.times_ns[-2]) * 1e-9
         return [predicted_pose(self.poses[-1], self.poses[-2], step_s, (time_ns - self.times_ns[-1]) * 1e-9)]
